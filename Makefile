@@ -1,0 +1,35 @@
+# Two commands for a fresh machine (see README "Quick start"):
+#   make demo   set up .venv if missing, install with the example extras, run the main example
+#   make test   set up .venv if missing, install with the test extras, run the whole suite
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+
+.PHONY: demo test bench accuracy clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+
+$(VENV)/.installed-examples: pyproject.toml | $(PY)
+	$(PY) -m pip install -q -e ".[examples]"
+	touch $@
+
+$(VENV)/.installed-test: pyproject.toml | $(PY)
+	$(PY) -m pip install -q -e ".[test]"
+	touch $@
+
+demo: $(VENV)/.installed-examples
+	$(PY) examples/pose_interpolation.py
+
+test: $(VENV)/.installed-test
+	$(PY) -m pytest
+
+bench: $(VENV)/.installed-test
+	$(PY) benchmarks/run.py
+
+accuracy: $(VENV)/.installed-test
+	$(PY) benchmarks/accuracy.py
+
+clean:
+	rm -rf $(VENV) out build *.egg-info

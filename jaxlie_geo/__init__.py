@@ -1,0 +1,21 @@
+"""jaxlie_geo: Lie groups for rigid-body motion in JAX.
+
+A drop-in superset of jaxlie 1.5 (``import jaxlie_geo as jaxlie``) with exact numerics,
+closed-form vector kernels, ``hat``/``vee``, geodesics and batch indexing.
+"""
+
+from . import hints as hints
+from . import manifold as manifold
+from . import utils as utils
+from ._base import MatrixLieGroup as MatrixLieGroup
+from ._base import SEBase as SEBase
+from ._base import SOBase as SOBase
+from ._batch import stack as stack
+from ._geodesic import Geodesic as Geodesic
+from ._geodesic import geodesic as geodesic
+from ._se2 import SE2 as SE2
+from ._se3 import SE3 as SE3
+from ._so2 import SO2 as SO2
+from ._so3 import SO3 as SO3
+
+__version__ = "0.1.0"

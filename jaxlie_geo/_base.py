@@ -1,0 +1,439 @@
+"""Abstract bases: what every matrix Lie group, and every semidirect product, does once.
+
+Conventions used throughout the package:
+
+* Elements are frozen dataclasses with a single array field holding the parameters,
+  shape ``(*batch, parameters_dim)``; leading batch axes broadcast numpy-style between
+  operands.
+* Perturbations are on the right: ``T ⊕ δ = T @ exp(δ)`` (jaxlie's and Solà et al.'s
+  "right" convention); ``adjoint`` moves tangents across: ``T @ exp(δ) = exp(Ad(T) δ) @ T``.
+* Tangent orderings follow jaxlie: SE(2) ``(vx, vy, θ)``, SE(3) ``(v, ω)``. Eberly
+  (seed 001 §10) orders SE(3) rotation-first; the formulas here are adapted.
+* Constructors never validate (JAX rebuilds pytrees with non-array leaves); factories and
+  operations do, at trace time, raising ``ValueError`` that names the expected and the
+  received shape.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Sequence, Tuple, TypeVar, Union, overload
+
+import jax
+import jax.numpy as jnp
+import numpy as onp
+from typing_extensions import Self, final
+
+from . import hints
+
+if TYPE_CHECKING:
+    from ._geodesic import Geodesic
+
+
+# ---------------------------------------------------------------------------------
+# Input checking, shared by every factory and operation.
+
+
+def _default_float() -> jnp.dtype:
+    """The default float dtype: float64 when ``jax_enable_x64`` is on, else float32."""
+    return jnp.zeros(()).dtype
+
+
+def as_float_array(x: Any, name: str, trailing: Tuple[int, ...], where: str) -> jax.Array:
+    """Convert ``x`` to a floating JAX array and check its trailing shape.
+
+    Integer and boolean inputs are promoted to the default float dtype; floating inputs
+    keep their dtype. Raises ``ValueError`` naming ``where``, ``name``, the expected
+    trailing shape and the received shape.
+    """
+    x = jnp.asarray(x)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        if jnp.issubdtype(x.dtype, jnp.complexfloating):
+            raise ValueError(f"{where}: `{name}` must be real, got dtype {x.dtype}.")
+        x = x.astype(_default_float())
+    k = len(trailing)
+    if x.ndim < k or tuple(x.shape[x.ndim - k :]) != tuple(trailing):
+        expected = "(*batch, " + ", ".join(map(str, trailing)) + ")" if k else "(*batch,)"
+        raise ValueError(
+            f"{where}: `{name}` must have shape {expected}, got shape {tuple(x.shape)}."
+        )
+    return x
+
+
+def resolve_dtype(dtype: Any) -> jnp.dtype:
+    """``None`` -> default float dtype; anything else must be a floating dtype."""
+    if dtype is None:
+        return _default_float()
+    dtype = jnp.dtype(dtype)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        raise ValueError(f"dtype must be a floating dtype, got {dtype}.")
+    return jax.dtypes.canonicalize_dtype(dtype)
+
+
+def components(x: jax.Array) -> Tuple[jax.Array, ...]:
+    """Split the last axis into a tuple of arrays of shape ``x.shape[:-1]``."""
+    return tuple(x[..., i] for i in range(x.shape[-1]))
+
+
+# ---------------------------------------------------------------------------------
+# Base classes.
+
+
+class MatrixLieGroup(abc.ABC):
+    """Interface of a matrix Lie group whose elements are stored as parameter arrays.
+
+    Subclasses are frozen dataclasses with one array field (``unit_complex``, ``wxyz``,
+    ...), registered as pytrees with ``jax.tree_util.register_dataclass``.
+    """
+
+    matrix_dim: ClassVar[int]
+    """Size n of the n×n matrix from ``as_matrix()``."""
+    parameters_dim: ClassVar[int]
+    """Length of the parameter vector, ``parameters().shape[-1]``."""
+    tangent_dim: ClassVar[int]
+    """Dimension k of the tangent space (the Lie algebra)."""
+    space_dim: ClassVar[int]
+    """Dimension of the points the group acts on."""
+
+    # -- construction ---------------------------------------------------------------
+
+    def __init__(self, parameters: jax.Array):  # pragma: no cover - replaced by dataclass
+        raise NotImplementedError
+
+    @classmethod
+    @abc.abstractmethod
+    def identity(cls, batch_axes: Tuple[int, ...] = (), dtype: Any = None) -> Self:
+        """The identity element.
+
+        Args:
+            batch_axes: leading batch shape of the result.
+            dtype: floating dtype of the parameters (default: JAX's default float).
+        Returns:
+            Identity with parameters of shape ``(*batch_axes, parameters_dim)``.
+        """
+
+    @classmethod
+    @abc.abstractmethod
+    def from_matrix(cls, matrix: hints.Array) -> Self:
+        """Element from its matrix, shape ``(*batch, matrix_dim, matrix_dim)``
+        (homogeneous for SE groups)."""
+
+    @classmethod
+    @abc.abstractmethod
+    def exp(cls, tangent: hints.Array) -> Self:
+        """Exponential map, ``expm(hat(tangent))``; tangent shape ``(*batch, tangent_dim)``."""
+
+    @classmethod
+    @abc.abstractmethod
+    def hat(cls, tangent: hints.Array) -> jax.Array:
+        """Lie algebra matrix of a tangent (Eberly's ``ToGroup``/L):
+        ``(*batch, tangent_dim) -> (*batch, matrix_dim, matrix_dim)``."""
+
+    @classmethod
+    @abc.abstractmethod
+    def vee(cls, matrix: hints.Array) -> jax.Array:
+        """Inverse of ``hat`` (Eberly's ``InverseL``):
+        ``(*batch, matrix_dim, matrix_dim) -> (*batch, tangent_dim)``. Reads the
+        generator coefficients; the symmetric part of the input is ignored."""
+
+    @classmethod
+    @abc.abstractmethod
+    def sample_uniform(
+        cls, key: jax.Array, batch_axes: Tuple[int, ...] = (), dtype: Any = None
+    ) -> Self:
+        """Uniformly distributed rotations (Haar measure); translations, where present,
+        uniform in [-1, 1]. Draws the same numbers as jaxlie 1.5 for the same key.
+
+        Args:
+            key: PRNG key.
+            batch_axes: leading batch shape; every element is drawn independently.
+            dtype: floating dtype (default: JAX's default float).
+        """
+
+    # -- accessors ------------------------------------------------------------------
+
+    def parameters(self) -> jax.Array:
+        """The underlying parameters, shape ``(*batch, parameters_dim)``."""
+        return getattr(self, dataclasses.fields(self)[0].name)  # type: ignore[arg-type]
+
+    @abc.abstractmethod
+    def as_matrix(self) -> jax.Array:
+        """Matrix of the element, ``(*batch, matrix_dim, matrix_dim)``; homogeneous for
+        SE groups."""
+
+    @final
+    def get_batch_axes(self) -> Tuple[int, ...]:
+        """Leading batch shape: ``parameters().shape[:-1]``."""
+        return tuple(self.parameters().shape[:-1])
+
+    # -- group operations -----------------------------------------------------------
+
+    @abc.abstractmethod
+    def apply(self, target: hints.Array) -> jax.Array:
+        """Act on points, shape ``(*batch, space_dim)``; batch axes broadcast."""
+
+    @abc.abstractmethod
+    def multiply(self, other: Self) -> Self:
+        """Composition ``self @ other``; batch axes broadcast."""
+
+    @abc.abstractmethod
+    def inverse(self) -> Self:
+        """Group inverse."""
+
+    @abc.abstractmethod
+    def log(self) -> jax.Array:
+        """Principal logarithm, ``vee(logm(as_matrix()))``, shape ``(*batch, tangent_dim)``
+        (rotation angle in [0, π])."""
+
+    @abc.abstractmethod
+    def adjoint(self) -> jax.Array:
+        """Adjoint matrix Ad, ``(*batch, tangent_dim, tangent_dim)``, with
+        ``M hat(x) M⁻¹ = hat(Ad x)`` and ``T @ exp(x) = exp(Ad x) @ T``."""
+
+    @abc.abstractmethod
+    def normalize(self) -> Self:
+        """Project the parameters back onto the group (unit quaternion / complex)."""
+
+    @abc.abstractmethod
+    def jlog(self) -> jax.Array:
+        """Jacobian of the log under right perturbations, the inverse right Jacobian at
+        ``log()``: ``d/dδ log(T @ exp(δ))`` at δ = 0, shape
+        ``(*batch, tangent_dim, tangent_dim)``."""
+
+    @overload
+    def __matmul__(self, other: Self) -> Self: ...
+
+    @overload
+    def __matmul__(self, other: hints.Array) -> jax.Array: ...
+
+    def __matmul__(self, other: Union[Self, hints.Array]) -> Union[Self, jax.Array]:
+        """``T @ U`` composes (``multiply``); ``T @ points`` acts (``apply``)."""
+        if isinstance(other, MatrixLieGroup):
+            if type(other) is not type(self):
+                raise TypeError(
+                    f"Cannot compose {type(self).__name__} with {type(other).__name__}."
+                )
+            return self.multiply(other)
+        if isinstance(other, (onp.ndarray, jax.Array)):
+            return self.apply(other)
+        return NotImplemented
+
+    # -- geodesics (seed 001 §4) ----------------------------------------------------
+
+    def interpolate(self, other: Self, t: hints.Scalar) -> Self:
+        """Point at time ``t`` on the geodesic from ``self`` (t = 0) to ``other`` (t = 1).
+
+        Body form ``self @ exp(t · log(self⁻¹ @ other))``, which equals Eberly's left form
+        ``exp(t · log(other @ self⁻¹)) @ self`` (seed 001 eq. 9) except where the relative
+        rotation is exactly π, and which does not lose ε·|translation| to cancellation far
+        from the origin. At a relative rotation of exactly π the principal log's tie-break
+        applies (quaternion with w = 0 as stored: the axis is the stored one).
+
+        Args:
+            other: end point; batch axes broadcast with ``self``.
+            t: scalar or array; it broadcasts numpy-style against the batch axes (unbatched
+                endpoints with ``t`` of shape (K,) give K poses; an outer product is
+                ``t[:, None]``). Values outside [0, 1] extrapolate along the same curve.
+        """
+        from ._geodesic import geodesic
+
+        return geodesic(self, other)(t)
+
+    # -- batch handling -------------------------------------------------------------
+
+    def __getitem__(self, index: Any) -> Self:
+        """Index the batch axes: ``T[0]``, ``T[:, 1]``, ``T[mask]``, ``T[..., None]``."""
+        p = jnp.moveaxis(self.parameters(), -1, 0)
+        index = index if isinstance(index, tuple) else (index,)
+        return type(self)(jnp.moveaxis(p[(slice(None), *index)], 0, -1))
+
+    def reshape(self, *shape: Union[int, Sequence[int]]) -> Self:
+        """Reshape the batch axes: ``T.reshape(2, 3)`` or ``T.reshape((2, 3))``."""
+        if len(shape) == 1 and not isinstance(shape[0], int):
+            shape = tuple(shape[0])  # type: ignore[assignment]
+        p = self.parameters()
+        return type(self)(p.reshape((*shape, p.shape[-1])))  # type: ignore[arg-type]
+
+    def __len__(self) -> int:
+        batch = self.get_batch_axes()
+        if not batch:
+            raise TypeError(f"len() of an unbatched {type(self).__name__}.")
+        return batch[0]
+
+    def __repr__(self) -> str:
+        name = dataclasses.fields(self)[0].name  # type: ignore[arg-type]
+        p = self.parameters()
+        if isinstance(p, jax.core.Tracer) or not hasattr(p, "shape"):
+            return f"{type(self).__name__}({name}={p})"
+        return f"{type(self).__name__}({name}={onp.round(onp.asarray(p), 5)})"
+
+    # -- shared helpers -------------------------------------------------------------
+
+    @classmethod
+    def _check_tangent(cls, tangent: hints.Array) -> jax.Array:
+        return as_float_array(tangent, "tangent", (cls.tangent_dim,), f"{cls.__name__}.exp")
+
+    @classmethod
+    def _check_matrix(cls, matrix: hints.Array, where: str) -> jax.Array:
+        n = cls.matrix_dim
+        return as_float_array(matrix, "matrix", (n, n), f"{cls.__name__}.{where}")
+
+    def _check_points(self, target: hints.Array) -> jax.Array:
+        target = as_float_array(
+            target, "target", (self.space_dim,), f"{type(self).__name__}.apply"
+        )
+        return target
+
+    @abc.abstractmethod
+    def _rplus_jacobian(self) -> jax.Array:
+        """d parameters(T @ exp(δ)) / dδ at δ = 0: ``(*batch, parameters_dim, tangent_dim)``."""
+
+
+class SOBase(MatrixLieGroup):
+    """Base class for special orthogonal groups."""
+
+
+ContainedSOType = TypeVar("ContainedSOType", bound=SOBase)
+
+
+class SEBase(Generic[ContainedSOType], MatrixLieGroup):
+    """Base class for special Euclidean groups: a rotation and a translation, stored as
+    ``(rotation parameters, translation)``. Composition, inverse, action and
+    normalisation are the semidirect-product formulas, written once here in terms of
+    the rotation's closed-form operations."""
+
+    _rotation_type: ClassVar[type]  # the SO group; set by each subclass
+
+    # -- SE-specific interface ------------------------------------------------------
+
+    @classmethod
+    def from_rotation_and_translation(
+        cls, rotation: ContainedSOType, translation: hints.Array
+    ) -> Self:
+        """Rigid transform ``x ↦ R x + t``; batch axes of the two broadcast.
+
+        Args:
+            rotation: an element of the matching SO group.
+            translation: shape ``(*batch, space_dim)``.
+        """
+        if not isinstance(rotation, cls._rotation_type):
+            raise TypeError(
+                f"{cls.__name__}.from_rotation_and_translation: `rotation` must be "
+                f"{cls._rotation_type.__name__}, got {type(rotation).__name__}."
+            )
+        t = as_float_array(
+            translation,
+            "translation",
+            (cls.space_dim,),
+            f"{cls.__name__}.from_rotation_and_translation",
+        )
+        r = rotation.parameters()
+        dtype = jnp.result_type(r, t)
+        batch = jnp.broadcast_shapes(r.shape[:-1], t.shape[:-1])
+        r = jnp.broadcast_to(r.astype(dtype), (*batch, r.shape[-1]))
+        t = jnp.broadcast_to(t.astype(dtype), (*batch, t.shape[-1]))
+        return cls(jnp.concatenate([r, t], axis=-1))
+
+    @classmethod
+    def from_rotation(cls, rotation: ContainedSOType) -> Self:
+        """Pure rotation (zero translation)."""
+        p = rotation.parameters()
+        return cls.from_rotation_and_translation(
+            rotation, jnp.zeros((*p.shape[:-1], cls.space_dim), p.dtype)
+        )
+
+    @classmethod
+    def from_translation(cls, translation: hints.Array) -> Self:
+        """Pure translation, ``translation`` of shape ``(*batch, space_dim)``."""
+        t = as_float_array(
+            translation, "translation", (cls.space_dim,), f"{cls.__name__}.from_translation"
+        )
+        rot = cls._rotation_type.identity(t.shape[:-1], dtype=t.dtype)
+        return cls.from_rotation_and_translation(rot, t)
+
+    def rotation(self) -> ContainedSOType:
+        """The rotation part."""
+        k = self._rotation_type.parameters_dim
+        return self._rotation_type(self.parameters()[..., :k])
+
+    def translation(self) -> jax.Array:
+        """The translation part, ``(*batch, space_dim)``."""
+        k = self._rotation_type.parameters_dim
+        return self.parameters()[..., k:]
+
+    # -- semidirect-product operations ----------------------------------------------
+
+    @classmethod
+    def identity(cls, batch_axes: Tuple[int, ...] = (), dtype: Any = None) -> Self:
+        rot = cls._rotation_type.identity(batch_axes, dtype)
+        return cls.from_rotation(rot)
+
+    def apply(self, target: hints.Array) -> jax.Array:
+        target = self._check_points(target)
+        return self.rotation().apply(target) + self.translation()
+
+    def multiply(self, other: Self) -> Self:
+        R = self.rotation()
+        return type(self).from_rotation_and_translation(
+            R.multiply(other.rotation()), R.apply(other.translation()) + self.translation()
+        )
+
+    def inverse(self) -> Self:
+        R_inv = self.rotation().inverse()
+        return type(self).from_rotation_and_translation(R_inv, -R_inv.apply(self.translation()))
+
+    def normalize(self) -> Self:
+        return type(self).from_rotation_and_translation(
+            self.rotation().normalize(), self.translation()
+        )
+
+    def as_matrix(self) -> jax.Array:
+        R = self.rotation().as_matrix()
+        t = self.translation()
+        n = self.space_dim
+        batch = jnp.broadcast_shapes(R.shape[:-2], t.shape[:-1])
+        top = jnp.concatenate(
+            [jnp.broadcast_to(R, (*batch, n, n)), jnp.broadcast_to(t, (*batch, n))[..., None]],
+            axis=-1,
+        )
+        bottom = jnp.broadcast_to(
+            jnp.eye(n + 1, dtype=t.dtype)[n], (*batch, 1, n + 1)
+        )
+        return jnp.concatenate([top, bottom], axis=-2)
+
+    @classmethod
+    def from_matrix(cls, matrix: hints.Array) -> Self:
+        m = cls._check_matrix(matrix, "from_matrix")
+        n = cls.space_dim
+        return cls.from_rotation_and_translation(
+            cls._rotation_type.from_matrix(m[..., :n, :n]), m[..., :n, n]
+        )
+
+    @classmethod
+    def sample_uniform(
+        cls, key: jax.Array, batch_axes: Tuple[int, ...] = (), dtype: Any = None
+    ) -> Self:
+        dtype = resolve_dtype(dtype)
+        key0, key1 = jax.random.split(key)
+        rot = cls._rotation_type.sample_uniform(key0, batch_axes, dtype)
+        t = jax.random.uniform(
+            key1, (*batch_axes, cls.space_dim), dtype=dtype, minval=-1.0, maxval=1.0
+        )
+        return cls.from_rotation_and_translation(rot, t)
+
+    def _rplus_jacobian(self) -> jax.Array:
+        # parameters = (q, t); T @ exp(δ) has q' = q·exp(δ_rot) to first order and
+        # t' = t + R δ_trans (the V matrix is I + O(δ)).
+        R = self.rotation()
+        Jq = R._rplus_jacobian()  # (*batch, k_rot_params, k_rot_tangent)
+        Rm = R.as_matrix()
+        batch = Rm.shape[:-2]
+        n, kq = self.space_dim, Jq.shape[-2]
+        top = jnp.concatenate(
+            [jnp.zeros((*batch, kq, n), Rm.dtype), Jq], axis=-1
+        )
+        bottom = jnp.concatenate(
+            [Rm, jnp.zeros((*batch, n, Jq.shape[-1]), Rm.dtype)], axis=-1
+        )
+        return jnp.concatenate([top, bottom], axis=-2)

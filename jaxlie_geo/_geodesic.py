@@ -1,0 +1,53 @@
+"""Geodesic paths between group elements (seed 001 §4 and §6's two GeodesicPath variants)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Generic, TypeVar
+
+import jax
+import jax.numpy as jnp
+
+from . import hints
+from ._base import MatrixLieGroup, as_float_array
+
+GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Geodesic(Generic[GroupT]):
+    """The geodesic ``t ↦ start @ exp(t · tangent)``, a pytree (jit/vmap friendly).
+
+    Built by ``geodesic(a, b)``, which computes ``tangent = log(a⁻¹ b)`` once (Eberly's
+    ``LogM1M0Inv`` + ``GeodesicPath(t, M0, log)`` variant, in the body form); calling it
+    costs one exp and one compose per time.
+    """
+
+    start: GroupT
+    """Element at t = 0, batch ``B``."""
+    tangent: jax.Array
+    """Body velocity ``log(start⁻¹ end)``, shape ``(*B', tangent_dim)``."""
+
+    def __call__(self, t: hints.Scalar) -> GroupT:
+        """Element at time(s) ``t``; ``t`` broadcasts numpy-style against the batch axes
+        (shape ``broadcast(B, t.shape)``)."""
+        G = type(self.start)
+        t = as_float_array(t, "t", (), f"{G.__name__} geodesic")
+        t = t.astype(jnp.result_type(t, self.tangent))
+        return self.start.multiply(G.exp(t[..., None] * self.tangent))
+
+
+def geodesic(start: GroupT, end: GroupT) -> Geodesic[GroupT]:
+    """Geodesic path from ``start`` (t = 0) to ``end`` (t = 1): ``start @ exp(t log(start⁻¹ end))``.
+
+    Uses the principal log (relative rotation angle ≤ π); at exactly π the log's
+    tie-break decides the direction (see ``SO3.log``). Batch axes of the endpoints
+    broadcast.
+    """
+    if type(start) is not type(end):
+        raise TypeError(
+            f"geodesic: endpoints must be the same group, got {type(start).__name__} "
+            f"and {type(end).__name__}."
+        )
+    return Geodesic(start, start.inverse().multiply(end).log())

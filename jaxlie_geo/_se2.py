@@ -1,0 +1,119 @@
+"""SE(2): planar rigid transforms, a unit complex number and a translation."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from typing_extensions import override
+
+from . import _scalar, hints
+from ._base import SEBase, as_float_array
+from ._so2 import SO2
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SE2(SEBase[SO2]):
+    """Special Euclidean group of planar rigid transforms ``x ↦ R x + t``.
+
+    Parameters: ``unit_complex_xy = (cos θ, sin θ, x, y)``, shape ``(*batch, 4)``.
+    Tangent: ``(vx, vy, θ)``, translation first (jaxlie's order), shape ``(*batch, 3)``.
+    """
+
+    unit_complex_xy: jax.Array
+    """``(cos θ, sin θ, x, y)``, shape ``(*batch, 4)``."""
+
+    matrix_dim = 3
+    parameters_dim = 4
+    tangent_dim = 3
+    space_dim = 2
+    _rotation_type = SO2
+
+    @staticmethod
+    def from_xy_theta(x: hints.Scalar, y: hints.Scalar, theta: hints.Scalar) -> SE2:
+        """Transform with translation ``(x, y)`` and rotation ``theta``; the three
+        broadcast to a common batch shape."""
+        x = as_float_array(x, "x", (), "SE2.from_xy_theta")
+        y = as_float_array(y, "y", (), "SE2.from_xy_theta")
+        theta = as_float_array(theta, "theta", (), "SE2.from_xy_theta")
+        x, y, theta = jnp.broadcast_arrays(x, y, theta)
+        return SE2.from_rotation_and_translation(
+            SO2.from_radians(theta), jnp.stack([x, y], axis=-1)
+        )
+
+    @classmethod
+    @override
+    def exp(cls, tangent: hints.Array) -> SE2:
+        """R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
+        B = (1 − cos θ)/θ = θ F1 (seed 001 §8.1; seed 000 §5 derives the same arc)."""
+        xi = cls._check_tangent(tangent)
+        vx, vy, theta = xi[..., 0], xi[..., 1], xi[..., 2]
+        x = theta * theta
+        A = _scalar.sinc(x)
+        B = theta * _scalar.F1(x)
+        return SE2(
+            jnp.stack(
+                [jnp.cos(theta), jnp.sin(theta), A * vx - B * vy, B * vx + A * vy], axis=-1
+            )
+        )
+
+    @override
+    def log(self) -> jax.Array:
+        """θ = atan2(s, c); v = V⁻¹ t with V⁻¹ = h I − (θ/2) J, h = (θ/2)cot(θ/2)
+        = 1 − θ² G(θ²) (the inverse of exp's V; A² + B² = sinc²(θ/2))."""
+        p = self.unit_complex_xy
+        c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+        theta = jnp.arctan2(s, c)
+        x = theta * theta
+        h = 1.0 - x * _scalar.G_principal(x)
+        half = 0.5 * theta
+        return jnp.stack([h * tx + half * ty, h * ty - half * tx, theta], axis=-1)
+
+    @classmethod
+    @override
+    def hat(cls, tangent: hints.Array) -> jax.Array:
+        xi = as_float_array(tangent, "tangent", (3,), "SE2.hat")
+        vx, vy, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        z = jnp.zeros_like(th)
+        return jnp.stack(
+            [jnp.stack([z, -th, vx], -1), jnp.stack([th, z, vy], -1), jnp.stack([z, z, z], -1)],
+            axis=-2,
+        )
+
+    @classmethod
+    @override
+    def vee(cls, matrix: hints.Array) -> jax.Array:
+        m = as_float_array(matrix, "matrix", (3, 3), "SE2.vee")
+        return jnp.stack([m[..., 0, 2], m[..., 1, 2], 0.5 * (m[..., 1, 0] - m[..., 0, 1])], -1)
+
+    @override
+    def adjoint(self) -> jax.Array:
+        """[[R, (ty, −tx)ᵀ], [0, 1]] for the (vx, vy, θ) ordering."""
+        p = self.unit_complex_xy
+        c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+        z, one = jnp.zeros_like(c), jnp.ones_like(c)
+        return jnp.stack(
+            [jnp.stack([c, -s, ty], -1), jnp.stack([s, c, -tx], -1), jnp.stack([z, z, one], -1)],
+            axis=-2,
+        )
+
+    @override
+    def jlog(self) -> jax.Array:
+        """J_r⁻¹(ξ) = [[M⁻¹, −M⁻¹ p], [0, 1]] with M⁻¹ = [[h, −θ/2], [θ/2, h]] and
+        p = (θF2 ρx − F1 ρy, F1 ρx + θF2 ρy) (Solà et al. 2018, eq. 163, inverted in
+        closed form)."""
+        xi = self.log()
+        rx, ry, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        x = th * th
+        h = 1.0 - x * _scalar.G_principal(x)
+        half = 0.5 * th
+        f1, tf2 = _scalar.F1(x), th * _scalar.F2(x)
+        px, py = tf2 * rx - f1 * ry, f1 * rx + tf2 * ry
+        qx, qy = -(h * px - half * py), -(half * px + h * py)
+        z, one = jnp.zeros_like(th), jnp.ones_like(th)
+        return jnp.stack(
+            [jnp.stack([h, -half, qx], -1), jnp.stack([half, h, qy], -1), jnp.stack([z, z, one], -1)],
+            axis=-2,
+        )

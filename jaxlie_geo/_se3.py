@@ -1,0 +1,118 @@
+"""SE(3): rigid transforms, a unit quaternion and a translation, in closed-form vectors."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from typing_extensions import override
+
+from . import _scalar, hints
+from ._base import SEBase, as_float_array
+from ._so3 import (
+    SO3,
+    cross,
+    exp_quaternion,
+    jac_right_inv_so3,
+    log_quaternion,
+    skew,
+    sq_norm,
+)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SE3(SEBase[SO3]):
+    """Special Euclidean group of 3D rigid transforms ``x ↦ R x + t``.
+
+    Parameters: ``wxyz_xyz = (qw, qx, qy, qz, x, y, z)``, shape ``(*batch, 7)``.
+    Tangent: ``(vx, vy, vz, ωx, ωy, ωz)``, translation first (jaxlie's order; Eberly's
+    seed 001 §10 and GTSAM put the rotation first), shape ``(*batch, 6)``.
+    """
+
+    wxyz_xyz: jax.Array
+    """``(qw, qx, qy, qz, x, y, z)``, shape ``(*batch, 7)``."""
+
+    matrix_dim = 4
+    parameters_dim = 7
+    tangent_dim = 6
+    space_dim = 3
+    _rotation_type = SO3
+
+    @classmethod
+    @override
+    def exp(cls, tangent: hints.Array) -> SE3:
+        """q = exp_SO3(ω); t = V v = v + F1 (ω × v) + F2 (ω × (ω × v)), θ = ‖ω‖
+        (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
+        xi = cls._check_tangent(tangent)
+        v, w = xi[..., :3], xi[..., 3:]
+        x = sq_norm(w)
+        wxv = cross(w, v)
+        t = v + _scalar.F1(x)[..., None] * wxv + _scalar.F2(x)[..., None] * cross(w, wxv)
+        return SE3(jnp.concatenate([exp_quaternion(w), t], axis=-1))
+
+    @override
+    def log(self) -> jax.Array:
+        """ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
+        G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
+        p = self.wxyz_xyz
+        w = log_quaternion(p[..., :4])
+        t = p[..., 4:]
+        wxt = cross(w, t)
+        v = t - 0.5 * wxt + _scalar.G_principal(sq_norm(w))[..., None] * cross(w, wxt)
+        return jnp.concatenate([v, w], axis=-1)
+
+    @classmethod
+    @override
+    def hat(cls, tangent: hints.Array) -> jax.Array:
+        xi = as_float_array(tangent, "tangent", (6,), "SE3.hat")
+        top = jnp.concatenate([skew(xi[..., 3:]), xi[..., :3, None]], axis=-1)
+        bottom = jnp.zeros((*xi.shape[:-1], 1, 4), xi.dtype)
+        return jnp.concatenate([top, bottom], axis=-2)
+
+    @classmethod
+    @override
+    def vee(cls, matrix: hints.Array) -> jax.Array:
+        m = as_float_array(matrix, "matrix", (4, 4), "SE3.vee")
+        return jnp.concatenate([m[..., :3, 3], SO3.vee(m[..., :3, :3])], axis=-1)
+
+    @override
+    def adjoint(self) -> jax.Array:
+        """[[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41, permuted)."""
+        R = self.rotation().as_matrix()
+        tR = skew(self.translation()) @ R
+        zero = jnp.zeros_like(R)
+        return jnp.concatenate(
+            [jnp.concatenate([R, tR], -1), jnp.concatenate([zero, R], -1)], axis=-2
+        )
+
+    @override
+    def jlog(self) -> jax.Array:
+        """J_r⁻¹(ξ) = J_l⁻¹(−ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]] with J⁻¹ = J_r⁻¹(ω) of SO(3)
+        and Q = Q(−ρ, −ω), Barfoot & Furgale 2014 eq. 102 (also Barfoot, *State
+        Estimation for Robotics*, eq. 7.86), whose coefficients F2, C2, D are kernels."""
+        xi = self.log()
+        rho, phi = xi[..., :3], xi[..., 3:]
+        x = sq_norm(phi)
+        P, Rh = skew(phi), skew(rho)
+        PR, RP, PRP = P @ Rh, Rh @ P, P @ Rh @ P
+        PP = P @ P
+        a = _scalar.F2(x)[..., None, None]
+        b = _scalar.C2(x)[..., None, None]
+        c = _scalar.D(x)[..., None, None]
+        Q = (
+            -0.5 * Rh
+            + a * (PR + RP - PRP)
+            - b * (PP @ Rh + Rh @ PP - 3.0 * PRP)
+            + c * (PRP @ P + P @ PRP)
+        )
+        Jinv = jac_right_inv_so3(phi)
+        zero = jnp.zeros_like(Jinv)
+        return jnp.concatenate(
+            [
+                jnp.concatenate([Jinv, -Jinv @ Q @ Jinv], -1),
+                jnp.concatenate([zero, Jinv], -1),
+            ],
+            axis=-2,
+        )

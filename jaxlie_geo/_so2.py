@@ -1,0 +1,135 @@
+"""SO(2): planar rotations as unit complex numbers."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Tuple
+
+import jax
+import jax.numpy as jnp
+from typing_extensions import override
+
+from . import hints
+from ._base import SOBase, as_float_array, resolve_dtype
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SO2(SOBase):
+    """Special orthogonal group of planar rotations.
+
+    Parameters: ``unit_complex = (cos θ, sin θ)``, shape ``(*batch, 2)``.
+    Tangent: ``(θ,)``, shape ``(*batch, 1)``. Matrix: ``[[c, -s], [s, c]]``.
+    """
+
+    unit_complex: jax.Array
+    """``(cos θ, sin θ)``, shape ``(*batch, 2)``."""
+
+    matrix_dim = 2
+    parameters_dim = 2
+    tangent_dim = 1
+    space_dim = 2
+
+    # -- factories ------------------------------------------------------------------
+
+    @staticmethod
+    def from_radians(theta: hints.Scalar) -> SO2:
+        """Rotation by ``theta`` radians; ``theta`` of shape ``batch`` gives that batch."""
+        theta = as_float_array(theta, "theta", (), "SO2.from_radians")
+        return SO2(jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1))
+
+    def as_radians(self) -> jax.Array:
+        """Angle in (-π, π], shape ``batch``."""
+        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        return jnp.arctan2(s, c)
+
+    @classmethod
+    @override
+    def identity(cls, batch_axes: Tuple[int, ...] = (), dtype: Any = None) -> SO2:
+        dtype = resolve_dtype(dtype)
+        return SO2(jnp.broadcast_to(jnp.array([1.0, 0.0], dtype), (*batch_axes, 2)))
+
+    @classmethod
+    @override
+    def from_matrix(cls, matrix: hints.Array) -> SO2:
+        m = cls._check_matrix(matrix, "from_matrix")
+        return SO2(m[..., :, 0])
+
+    @classmethod
+    @override
+    def sample_uniform(
+        cls, key: jax.Array, batch_axes: Tuple[int, ...] = (), dtype: Any = None
+    ) -> SO2:
+        dtype = resolve_dtype(dtype)
+        theta = jax.random.uniform(
+            key, batch_axes, dtype=dtype, minval=0.0, maxval=2.0 * jnp.pi
+        )
+        return SO2.from_radians(theta)
+
+    # -- Lie algebra ----------------------------------------------------------------
+
+    @classmethod
+    @override
+    def exp(cls, tangent: hints.Array) -> SO2:
+        theta = cls._check_tangent(tangent)[..., 0]
+        return SO2(jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1))
+
+    @override
+    def log(self) -> jax.Array:
+        return self.as_radians()[..., None]
+
+    @classmethod
+    @override
+    def hat(cls, tangent: hints.Array) -> jax.Array:
+        theta = as_float_array(tangent, "tangent", (1,), "SO2.hat")[..., 0]
+        z = jnp.zeros_like(theta)
+        return jnp.stack([jnp.stack([z, -theta], -1), jnp.stack([theta, z], -1)], -2)
+
+    @classmethod
+    @override
+    def vee(cls, matrix: hints.Array) -> jax.Array:
+        m = as_float_array(matrix, "matrix", (2, 2), "SO2.vee")
+        return m[..., 1, 0:1]
+
+    @override
+    def adjoint(self) -> jax.Array:
+        return jnp.ones((*self.get_batch_axes(), 1, 1), self.unit_complex.dtype)
+
+    @override
+    def jlog(self) -> jax.Array:
+        return jnp.ones((*self.get_batch_axes(), 1, 1), self.unit_complex.dtype)
+
+    # -- operations -----------------------------------------------------------------
+
+    @override
+    def as_matrix(self) -> jax.Array:
+        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        return jnp.stack([jnp.stack([c, -s], -1), jnp.stack([s, c], -1)], -2)
+
+    @override
+    def apply(self, target: hints.Array) -> jax.Array:
+        p = self._check_points(target)
+        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        x, y = p[..., 0], p[..., 1]
+        return jnp.stack([c * x - s * y, s * x + c * y], axis=-1)
+
+    @override
+    def multiply(self, other: SO2) -> SO2:
+        c1, s1 = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        c2, s2 = other.unit_complex[..., 0], other.unit_complex[..., 1]
+        return SO2(jnp.stack([c1 * c2 - s1 * s2, s1 * c2 + c1 * s2], axis=-1))
+
+    @override
+    def inverse(self) -> SO2:
+        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        return SO2(jnp.stack([c, -s], axis=-1))
+
+    @override
+    def normalize(self) -> SO2:
+        p = self.unit_complex
+        return SO2(p / jnp.linalg.norm(p, axis=-1, keepdims=True))
+
+    @override
+    def _rplus_jacobian(self) -> jax.Array:
+        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        return jnp.stack([-s, c], axis=-1)[..., None]

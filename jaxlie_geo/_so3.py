@@ -1,0 +1,306 @@
+"""SO(3): 3D rotations as unit quaternions, with closed-form vector kernels."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Tuple
+
+import jax
+import jax.numpy as jnp
+from typing_extensions import override
+
+from . import _scalar, hints
+from ._base import SOBase, as_float_array, resolve_dtype
+
+
+def cross(a: jax.Array, b: jax.Array) -> jax.Array:
+    """Cross product over the last axis (broadcasting), written out: no (..., 3, 3)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def skew(w: jax.Array) -> jax.Array:
+    """The matrix ŵ with ŵ v = w × v (seed 001 eq. 26): ``(*batch, 3) -> (*batch, 3, 3)``."""
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    o = jnp.zeros_like(x)
+    return jnp.stack(
+        [jnp.stack([o, -z, y], -1), jnp.stack([z, o, -x], -1), jnp.stack([-y, x, o], -1)],
+        axis=-2,
+    )
+
+
+def sq_norm(w: jax.Array) -> jax.Array:
+    return jnp.sum(w * w, axis=-1)
+
+
+def exp_quaternion(omega: jax.Array) -> jax.Array:
+    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖, from kernels of θ²/4."""
+    x4 = 0.25 * sq_norm(omega)
+    w = _scalar.cos_(x4)
+    xyz = (0.5 * _scalar.sinc(x4))[..., None] * omega
+    return jnp.concatenate([w[..., None], xyz], axis=-1)
+
+
+def log_quaternion(wxyz: jax.Array) -> jax.Array:
+    """Principal log of a (not necessarily unit) quaternion: ω = 2 atan2(‖v‖, w)/‖v‖ · v
+    after the sign choice w ≥ 0, so the angle is in [0, π]. The quaternion atan2 form is
+    accurate up to and at π (no acos, no snapping); at w = 0 exactly (angle π) the stored
+    vector part gives the axis."""
+    w = wxyz[..., 0]
+    v = wxyz[..., 1:]
+    sign = jnp.where(w < 0, -1.0, 1.0).astype(wxyz.dtype)
+    scale = 2.0 * sign * _scalar.atan2_over(sq_norm(v), sign * w)
+    return scale[..., None] * v
+
+
+def quaternion_product(p: jax.Array, q: jax.Array) -> jax.Array:
+    """Hamilton product of ``(w, x, y, z)`` quaternions (batch axes broadcast)."""
+    w1, x1, y1, z1 = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    w2, x2, y2, z2 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return jnp.stack(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ],
+        axis=-1,
+    )
+
+
+def rotate(wxyz: jax.Array, p: jax.Array) -> jax.Array:
+    """R(q) p for a unit quaternion: p + 2w (u × p) + 2 u × (u × p), u = (x, y, z)."""
+    w = wxyz[..., :1]
+    u = wxyz[..., 1:]
+    uxp = cross(u, p)
+    return p + 2.0 * (w * uxp + cross(u, uxp))
+
+
+def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
+    """Inverse right Jacobian of SO(3), J_r⁻¹(ω) = I + ½ ω̂ + G(θ²) ω̂²
+    (Solà et al. 2018, eq. 146; G from _scalar): ``(*batch, 3) -> (*batch, 3, 3)``."""
+    W = skew(omega)
+    eye = jnp.eye(3, dtype=omega.dtype)
+    return eye + 0.5 * W + _scalar.G(sq_norm(omega))[..., None, None] * (W @ W)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SO3(SOBase):
+    """Special orthogonal group of 3D rotations.
+
+    Parameters: ``wxyz``, a unit quaternion ``(qw, qx, qy, qz)``, shape ``(*batch, 4)``
+    (Hamilton convention; q and −q are the same rotation, and no operation flips the
+    sign implicitly). Tangent: ``(ωx, ωy, ωz)``, the rotation vector, shape ``(*batch, 3)``.
+    """
+
+    wxyz: jax.Array
+    """Unit quaternion ``(w, x, y, z)``, shape ``(*batch, 4)``."""
+
+    matrix_dim = 3
+    parameters_dim = 4
+    tangent_dim = 3
+    space_dim = 3
+
+    # -- factories ------------------------------------------------------------------
+
+    @staticmethod
+    def _about_axis(theta: hints.Scalar, axis: int, where: str) -> SO3:
+        theta = as_float_array(theta, "theta", (), where)
+        half = 0.5 * theta
+        parts = [jnp.cos(half)] + [jnp.zeros_like(half)] * 3
+        parts[axis + 1] = jnp.sin(half)
+        return SO3(jnp.stack(parts, axis=-1))
+
+    @staticmethod
+    def from_x_radians(theta: hints.Scalar) -> SO3:
+        """Rotation by ``theta`` about x; ``theta`` of shape ``batch``."""
+        return SO3._about_axis(theta, 0, "SO3.from_x_radians")
+
+    @staticmethod
+    def from_y_radians(theta: hints.Scalar) -> SO3:
+        """Rotation by ``theta`` about y; ``theta`` of shape ``batch``."""
+        return SO3._about_axis(theta, 1, "SO3.from_y_radians")
+
+    @staticmethod
+    def from_z_radians(theta: hints.Scalar) -> SO3:
+        """Rotation by ``theta`` about z; ``theta`` of shape ``batch``."""
+        return SO3._about_axis(theta, 2, "SO3.from_z_radians")
+
+    @staticmethod
+    def from_rpy_radians(roll: hints.Scalar, pitch: hints.Scalar, yaw: hints.Scalar) -> SO3:
+        """From ZYX Euler angles (mobile-robot convention):
+        ``Rz(yaw) @ Ry(pitch) @ Rx(roll)``, roll applied first."""
+        return (
+            SO3.from_z_radians(yaw) @ SO3.from_y_radians(pitch) @ SO3.from_x_radians(roll)
+        )
+
+    @staticmethod
+    def from_quaternion_xyzw(xyzw: hints.Array) -> SO3:
+        """From an ``(x, y, z, w)`` quaternion, shape ``(*batch, 4)``; sign kept."""
+        xyzw = as_float_array(xyzw, "xyzw", (4,), "SO3.from_quaternion_xyzw")
+        return SO3(jnp.roll(xyzw, shift=1, axis=-1))
+
+    def as_quaternion_xyzw(self) -> jax.Array:
+        """The quaternion as ``(x, y, z, w)``, shape ``(*batch, 4)``."""
+        return jnp.roll(self.wxyz, shift=-1, axis=-1)
+
+    def as_rpy_radians(self) -> hints.RollPitchYaw:
+        """ZYX Euler angles (roll, pitch, yaw), each of shape ``batch``."""
+        return hints.RollPitchYaw(
+            roll=self.compute_roll_radians(),
+            pitch=self.compute_pitch_radians(),
+            yaw=self.compute_yaw_radians(),
+        )
+
+    def compute_roll_radians(self) -> jax.Array:
+        """Roll (rotation about x) of the ZYX convention, in (-π, π]."""
+        w, x, y, z = (self.wxyz[..., i] for i in range(4))
+        return jnp.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+
+    def compute_pitch_radians(self) -> jax.Array:
+        """Pitch (rotation about y) of the ZYX convention, in [-π/2, π/2]. The sine is
+        clipped to [-1, 1], so rounding at gimbal lock gives ±π/2, never NaN."""
+        w, x, y, z = (self.wxyz[..., i] for i in range(4))
+        return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+
+    def compute_yaw_radians(self) -> jax.Array:
+        """Yaw (rotation about z) of the ZYX convention, in (-π, π]."""
+        w, x, y, z = (self.wxyz[..., i] for i in range(4))
+        return jnp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+    @classmethod
+    @override
+    def identity(cls, batch_axes: Tuple[int, ...] = (), dtype: Any = None) -> SO3:
+        dtype = resolve_dtype(dtype)
+        return SO3(jnp.broadcast_to(jnp.array([1.0, 0.0, 0.0, 0.0], dtype), (*batch_axes, 4)))
+
+    @classmethod
+    @override
+    def from_matrix(cls, matrix: hints.Array) -> SO3:
+        """Quaternion from a rotation matrix by Shepperd's pivoting: of the four
+        expressions 4w², 4x², 4y², 4z² (from the trace and the diagonal), the largest is
+        square-rooted, the other three components come from off-diagonal sums or
+        differences divided by it. Accurate at every angle, π included; one sqrt."""
+        m = cls._check_matrix(matrix, "from_matrix")
+        r = [[m[..., i, j] for j in range(3)] for i in range(3)]
+        t0 = 1.0 + r[0][0] + r[1][1] + r[2][2]
+        t1 = 1.0 + r[0][0] - r[1][1] - r[2][2]
+        t2 = 1.0 - r[0][0] + r[1][1] - r[2][2]
+        t3 = 1.0 - r[0][0] - r[1][1] + r[2][2]
+        a = r[2][1] - r[1][2]
+        b = r[0][2] - r[2][0]
+        c = r[1][0] - r[0][1]
+        d = r[0][1] + r[1][0]
+        e = r[0][2] + r[2][0]
+        f = r[1][2] + r[2][1]
+        cands = [
+            (t0, jnp.stack([t0, a, b, c], -1)),
+            (t1, jnp.stack([a, t1, d, e], -1)),
+            (t2, jnp.stack([b, d, t2, f], -1)),
+            (t3, jnp.stack([c, e, f, t3], -1)),
+        ]
+        best_t, best_q = cands[0]
+        for t, q in cands[1:]:
+            better = t > best_t
+            best_t = jnp.where(better, t, best_t)
+            best_q = jnp.where(better[..., None], q, best_q)
+        return SO3(best_q * (0.5 / jnp.sqrt(best_t))[..., None])
+
+    @classmethod
+    @override
+    def sample_uniform(
+        cls, key: jax.Array, batch_axes: Tuple[int, ...] = (), dtype: Any = None
+    ) -> SO3:
+        # Uniform on S³ (Shoemake 1992; LaValle, Planning Algorithms §5.2.2), drawing
+        # the same numbers as jaxlie for the same key.
+        dtype = resolve_dtype(dtype)
+        u = jax.random.uniform(
+            key,
+            (*batch_axes, 3),
+            dtype=dtype,
+            minval=jnp.zeros(3, dtype),
+            maxval=jnp.array([1.0, 2.0 * jnp.pi, 2.0 * jnp.pi], dtype),
+        )
+        u1, u2, u3 = u[..., 0], u[..., 1], u[..., 2]
+        a, b = jnp.sqrt(1.0 - u1), jnp.sqrt(u1)
+        return SO3(
+            jnp.stack([a * jnp.sin(u2), a * jnp.cos(u2), b * jnp.sin(u3), b * jnp.cos(u3)], -1)
+        )
+
+    # -- Lie algebra ----------------------------------------------------------------
+
+    @classmethod
+    @override
+    def exp(cls, tangent: hints.Array) -> SO3:
+        """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖, with both coefficients as series-safe
+        kernels of θ²/4 (seed 002's Rodrigues form, in quaternions). Any angle; for
+        θ > π the result has w < 0 (it is not re-signed)."""
+        return SO3(exp_quaternion(cls._check_tangent(tangent)))
+
+    @override
+    def log(self) -> jax.Array:
+        return log_quaternion(self.wxyz)
+
+    @classmethod
+    @override
+    def hat(cls, tangent: hints.Array) -> jax.Array:
+        return skew(as_float_array(tangent, "tangent", (3,), "SO3.hat"))
+
+    @classmethod
+    @override
+    def vee(cls, matrix: hints.Array) -> jax.Array:
+        m = as_float_array(matrix, "matrix", (3, 3), "SO3.vee")
+        return 0.5 * jnp.stack(
+            [m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]],
+            axis=-1,
+        )
+
+    @override
+    def adjoint(self) -> jax.Array:
+        return self.as_matrix()
+
+    @override
+    def jlog(self) -> jax.Array:
+        return jac_right_inv_so3(self.log())
+
+    # -- operations -----------------------------------------------------------------
+
+    @override
+    def as_matrix(self) -> jax.Array:
+        w, x, y, z = (self.wxyz[..., i] for i in range(4))
+        xx, yy, zz = x * x, y * y, z * z
+        xy, xz, yz = x * y, x * z, y * z
+        wx, wy, wz = w * x, w * y, w * z
+        rows = [
+            [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
+            [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
+            [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
+        ]
+        return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
+
+    @override
+    def apply(self, target: hints.Array) -> jax.Array:
+        return rotate(self.wxyz, self._check_points(target))
+
+    @override
+    def multiply(self, other: SO3) -> SO3:
+        return SO3(quaternion_product(self.wxyz, other.wxyz))
+
+    @override
+    def inverse(self) -> SO3:
+        q = self.wxyz
+        return SO3(jnp.concatenate([q[..., :1], -q[..., 1:]], axis=-1))
+
+    @override
+    def normalize(self) -> SO3:
+        q = self.wxyz
+        return SO3(q / jnp.linalg.norm(q, axis=-1, keepdims=True))
+
+    @override
+    def _rplus_jacobian(self) -> jax.Array:
+        # d/dδ of q ⊗ (1, δ/2) at δ = 0.
+        w, x, y, z = (self.wxyz[..., i] for i in range(4))
+        rows = [[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]]
+        return 0.5 * jnp.stack([jnp.stack(r, -1) for r in rows], -2)

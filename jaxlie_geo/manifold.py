@@ -1,0 +1,128 @@
+"""Optimisation on the manifold (jaxlie.manifold's API): right ⊕/⊖ on pytrees, tangent-space
+gradients, and the Jacobian of ⊕ with respect to the parameters.
+
+In every function, a pytree may mix group elements (handled on their tangent spaces) and
+plain arrays (handled with ordinary + and −).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Sequence, Union
+
+import jax
+import jax.numpy as jnp
+
+from ._base import MatrixLieGroup
+
+TangentPytree = Any
+"""The pytree of tangents of a pytree of elements (arrays in place of groups)."""
+
+
+def _is_group(x: Any) -> bool:
+    return isinstance(x, MatrixLieGroup)
+
+
+def _map(f_group: Callable, f_array: Callable, tree: Any, *rest: Any) -> Any:
+    return jax.tree.map(
+        lambda x, *r: f_group(x, *r) if _is_group(x) else f_array(x, *r),
+        tree,
+        *rest,
+        is_leaf=_is_group,
+    )
+
+
+def rplus(transform: Any, delta: TangentPytree) -> Any:
+    """Right plus, ``T ⊕ δ = T @ exp(δ)`` for each group leaf, ``x + δ`` for arrays."""
+    return _map(lambda T, d: T.multiply(type(T).exp(d)), jnp.add, transform, delta)
+
+
+def rminus(a: Any, b: Any) -> TangentPytree:
+    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays
+    (jaxlie's argument order: the result δ satisfies ``a ⊕ δ = b``)."""
+    return _map(lambda A, B: A.inverse().multiply(B).log(), lambda x, y: y - x, a, b)
+
+
+def zero_tangents(pytree: Any) -> TangentPytree:
+    """Zero tangents shaped like each leaf's tangent space (arrays: ``zeros_like``)."""
+    return _map(
+        lambda T: jnp.zeros((*T.get_batch_axes(), T.tangent_dim), T.parameters().dtype),
+        jnp.zeros_like,
+        pytree,
+    )
+
+
+def normalize_all(pytree: Any) -> Any:
+    """``normalize()`` every group element of a pytree; arrays pass through."""
+    return _map(lambda T: T.normalize(), lambda x: x, pytree)
+
+
+def value_and_grad(
+    fun: Callable,
+    argnums: Union[int, Sequence[int]] = 0,
+    has_aux: bool = False,
+    holomorphic: bool = False,
+    allow_int: bool = False,
+    **kwargs: Any,
+) -> Callable:
+    """Like ``jax.value_and_grad``, but gradients of group arguments are taken with
+    respect to a right perturbation δ in the tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0."""
+
+    def wrapped(*args: Any, **fkwargs: Any) -> Any:
+        def tangent_fun(*deltas: Any, **kdeltas: Any) -> Any:
+            return fun(
+                *rplus(args, deltas), **{k: rplus(fkwargs[k], kdeltas[k]) for k in fkwargs}
+            )
+
+        zeros = tuple(zero_tangents(a) for a in args)
+        kzeros = {k: zero_tangents(v) for k, v in fkwargs.items()}
+        return jax.value_and_grad(
+            tangent_fun,
+            argnums=argnums,
+            has_aux=has_aux,
+            holomorphic=holomorphic,
+            allow_int=allow_int,
+            **kwargs,
+        )(*zeros, **kzeros)
+
+    return wrapped
+
+
+def grad(
+    fun: Callable,
+    argnums: Union[int, Sequence[int]] = 0,
+    has_aux: bool = False,
+    holomorphic: bool = False,
+    allow_int: bool = False,
+    **kwargs: Any,
+) -> Callable:
+    """Like ``jax.grad``, with tangent-space gradients for group arguments
+    (see ``value_and_grad``)."""
+    vg = value_and_grad(fun, argnums, has_aux, holomorphic, allow_int, **kwargs)
+
+    def wrapped(*args: Any, **fkwargs: Any) -> Any:
+        out = vg(*args, **fkwargs)
+        return (out[1], out[0][1]) if has_aux else out[1]
+
+    return wrapped
+
+
+def rplus_jacobian_parameters_wrt_delta(transform: MatrixLieGroup) -> jax.Array:
+    """Closed-form ``d parameters(T ⊕ δ) / dδ`` at δ = 0, shape
+    ``(*batch, parameters_dim, tangent_dim)`` (cheaper to compile than autodiff)."""
+    if not _is_group(transform):
+        raise TypeError(
+            f"rplus_jacobian_parameters_wrt_delta: expected a group element, got "
+            f"{type(transform).__name__}."
+        )
+    return transform._rplus_jacobian()
+
+
+__all__ = [
+    "rplus",
+    "rminus",
+    "zero_tangents",
+    "normalize_all",
+    "grad",
+    "value_and_grad",
+    "rplus_jacobian_parameters_wrt_delta",
+]
