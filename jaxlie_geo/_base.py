@@ -195,11 +195,42 @@ class MatrixLieGroup(abc.ABC):
     def normalize(self) -> Self:
         """Project the parameters back onto the group (unit quaternion / complex)."""
 
-    @abc.abstractmethod
     def jlog(self) -> jax.Array:
         """Jacobian of the log under right perturbations, the inverse right Jacobian at
         ``log()``: ``d/dδ log(T @ exp(δ))`` at δ = 0, shape
         ``(*batch, tangent_dim, tangent_dim)``."""
+        return type(self).jac_right_inv(self.log())
+
+    # -- Jacobians of the exponential (Solà et al. 2018, §IV) ------------------------
+
+    @classmethod
+    @abc.abstractmethod
+    def jac_right(cls, tangent: hints.Array) -> jax.Array:
+        """Right Jacobian J_r(x): ``exp(x + δ) ≈ exp(x) @ exp(J_r(x) δ)``;
+        ``(*batch, k) -> (*batch, k, k)``. Equal to Σ (−ad x)ⁿ/(n+1)!."""
+
+    @classmethod
+    @abc.abstractmethod
+    def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
+        """Inverse right Jacobian J_r⁻¹(x), in closed form (not a matrix inverse);
+        ``(*batch, k) -> (*batch, k, k)``. Singular where the rotation angle is 2π."""
+
+    @classmethod
+    def jac_left(cls, tangent: hints.Array) -> jax.Array:
+        """Left Jacobian J_l(x) = J_r(−x) = Ad(exp x) J_r(x):
+        ``exp(x + δ) ≈ exp(J_l(x) δ) @ exp(x)``; ``(*batch, k) -> (*batch, k, k)``."""
+        return cls.jac_right(-cls._check_tangent(tangent, "jac_left"))
+
+    @classmethod
+    def jac_left_inv(cls, tangent: hints.Array) -> jax.Array:
+        """Inverse left Jacobian J_l⁻¹(x) = J_r⁻¹(−x); ``(*batch, k) -> (*batch, k, k)``."""
+        return cls.jac_right_inv(-cls._check_tangent(tangent, "jac_left_inv"))
+
+    @classmethod
+    @abc.abstractmethod
+    def ad(cls, tangent: hints.Array) -> jax.Array:
+        """Lie-algebra adjoint: the matrix of y ↦ vee([hat x, hat y]);
+        ``(*batch, k) -> (*batch, k, k)``. ``Ad(exp x) = expm(ad x)``."""
 
     @overload
     def __matmul__(self, other: Self) -> Self: ...
@@ -271,8 +302,10 @@ class MatrixLieGroup(abc.ABC):
     # -- shared helpers -------------------------------------------------------------
 
     @classmethod
-    def _check_tangent(cls, tangent: hints.Array) -> jax.Array:
-        return as_float_array(tangent, "tangent", (cls.tangent_dim,), f"{cls.__name__}.exp")
+    def _check_tangent(cls, tangent: hints.Array, where: str = "exp") -> jax.Array:
+        return as_float_array(
+            tangent, "tangent", (cls.tangent_dim,), f"{cls.__name__}.{where}"
+        )
 
     @classmethod
     def _check_matrix(cls, matrix: hints.Array, where: str) -> jax.Array:

@@ -99,21 +99,48 @@ class SE2(SEBase[SO2]):
             axis=-2,
         )
 
-    @override
-    def jlog(self) -> jax.Array:
-        """J_r⁻¹(ξ) = [[M⁻¹, −M⁻¹ p], [0, 1]] with M⁻¹ = [[h, −θ/2], [θ/2, h]] and
-        p = (θF2 ρx − F1 ρy, F1 ρx + θF2 ρy) (Solà et al. 2018, eq. 163, inverted in
-        closed form)."""
-        xi = self.log()
+    @staticmethod
+    def _jac_parts(xi: jax.Array):
         rx, ry, th = xi[..., 0], xi[..., 1], xi[..., 2]
         x = th * th
-        h = 1.0 - x * _scalar.G_principal(x)
-        half = 0.5 * th
         f1, tf2 = _scalar.F1(x), th * _scalar.F2(x)
+        # J_r's translation column p (Solà et al. 2018, eq. 163, in kernels).
         px, py = tf2 * rx - f1 * ry, f1 * rx + tf2 * ry
+        return th, x, f1, px, py
+
+    @staticmethod
+    def _mat3(rows) -> jax.Array:
+        return jnp.stack([jnp.stack(r, -1) for r in rows], axis=-2)
+
+    @classmethod
+    @override
+    def jac_right(cls, tangent: hints.Array) -> jax.Array:
+        """J_r(ξ) = [[A, B, p_x], [−B, A, p_y], [0, 0, 1]], A = sin θ/θ, B = (1 − cos θ)/θ,
+        p = (θF2 ρx − F1 ρy, F1 ρx + θF2 ρy) (Solà et al. 2018, eq. 163)."""
+        xi = cls._check_tangent(tangent, "jac_right")
+        th, x, f1, px, py = cls._jac_parts(xi)
+        A, B = _scalar.sinc(x), th * f1
+        z, one = jnp.zeros_like(th), jnp.ones_like(th)
+        return cls._mat3([[A, B, px], [-B, A, py], [z, z, one]])
+
+    @classmethod
+    @override
+    def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
+        """J_r⁻¹(ξ) = [[M⁻¹, −M⁻¹ p], [0, 1]] with M⁻¹ = [[h, −θ/2], [θ/2, h]],
+        h = (θ/2)cot(θ/2) = 1 − θ² G(θ²): J_r inverted in closed form."""
+        xi = cls._check_tangent(tangent, "jac_right_inv")
+        th, x, f1, px, py = cls._jac_parts(xi)
+        h = 1.0 - x * _scalar.G(x)
+        half = 0.5 * th
         qx, qy = -(h * px - half * py), -(half * px + h * py)
         z, one = jnp.zeros_like(th), jnp.ones_like(th)
-        return jnp.stack(
-            [jnp.stack([h, -half, qx], -1), jnp.stack([half, h, qy], -1), jnp.stack([z, z, one], -1)],
-            axis=-2,
-        )
+        return cls._mat3([[h, -half, qx], [half, h, qy], [z, z, one]])
+
+    @classmethod
+    @override
+    def ad(cls, tangent: hints.Array) -> jax.Array:
+        """[[0, −θ, vy], [θ, 0, −vx], [0, 0, 0]] for the (vx, vy, θ) ordering."""
+        xi = cls._check_tangent(tangent, "ad")
+        vx, vy, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        z = jnp.zeros_like(th)
+        return cls._mat3([[z, -th, vy], [th, z, -vx], [z, z, z]])

@@ -15,8 +15,10 @@ from ._so3 import (
     cross,
     exp_quaternion,
     jac_right_inv_so3,
+    jac_right_so3,
     log_quaternion,
     skew,
+    skew_sq,
     sq_norm,
 )
 
@@ -87,32 +89,56 @@ class SE3(SEBase[SO3]):
             [jnp.concatenate([R, tR], -1), jnp.concatenate([zero, R], -1)], axis=-2
         )
 
-    @override
-    def jlog(self) -> jax.Array:
-        """J_r⁻¹(ξ) = J_l⁻¹(−ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]] with J⁻¹ = J_r⁻¹(ω) of SO(3)
-        and Q = Q(−ρ, −ω), Barfoot & Furgale 2014 eq. 102 (also Barfoot, *State
-        Estimation for Robotics*, eq. 7.86), whose coefficients F2, C2, D are kernels."""
-        xi = self.log()
+    @staticmethod
+    def _q_block(xi: jax.Array) -> jax.Array:
+        """Q(−ρ, −φ), the coupling block of J_r (Barfoot & Furgale 2014, eq. 102, at −ξ):
+        −½ρ̂ + F2 (φ̂ρ̂ + ρ̂φ̂ − φ̂ρ̂φ̂) − C2 (φ̂²ρ̂ + ρ̂φ̂² − 3φ̂ρ̂φ̂) + D (φ̂ρ̂φ̂² + φ̂²ρ̂φ̂)."""
         rho, phi = xi[..., :3], xi[..., 3:]
         x = sq_norm(phi)
         P, Rh = skew(phi), skew(rho)
-        PR, RP, PRP = P @ Rh, Rh @ P, P @ Rh @ P
-        PP = P @ P
+        PR, RP = P @ Rh, Rh @ P
+        PRP = PR @ P
+        PP = skew_sq(phi)
         a = _scalar.F2(x)[..., None, None]
         b = _scalar.C2(x)[..., None, None]
         c = _scalar.D(x)[..., None, None]
-        Q = (
+        return (
             -0.5 * Rh
             + a * (PR + RP - PRP)
             - b * (PP @ Rh + Rh @ PP - 3.0 * PRP)
             + c * (PRP @ P + P @ PRP)
         )
-        Jinv = jac_right_inv_so3(phi)
-        zero = jnp.zeros_like(Jinv)
+
+    @staticmethod
+    def _blocks(top_left: jax.Array, top_right: jax.Array) -> jax.Array:
+        zero = jnp.zeros_like(top_left)
         return jnp.concatenate(
             [
-                jnp.concatenate([Jinv, -Jinv @ Q @ Jinv], -1),
-                jnp.concatenate([zero, Jinv], -1),
+                jnp.concatenate([top_left, top_right], -1),
+                jnp.concatenate([zero, top_left], -1),
             ],
             axis=-2,
         )
+
+    @classmethod
+    @override
+    def jac_right(cls, tangent: hints.Array) -> jax.Array:
+        """J_r(ξ) = J_l(−ξ) = [[J_r(φ), Q(−ρ, −φ)], [0, J_r(φ)]] for ξ = (ρ, φ)."""
+        xi = cls._check_tangent(tangent, "jac_right")
+        return cls._blocks(jac_right_so3(xi[..., 3:]), cls._q_block(xi))
+
+    @classmethod
+    @override
+    def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
+        """J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]], J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ)
+        (block inverse of ``jac_right``, in closed form)."""
+        xi = cls._check_tangent(tangent, "jac_right_inv")
+        Jinv = jac_right_inv_so3(xi[..., 3:])
+        return cls._blocks(Jinv, -Jinv @ cls._q_block(xi) @ Jinv)
+
+    @classmethod
+    @override
+    def ad(cls, tangent: hints.Array) -> jax.Array:
+        """[[φ̂, ρ̂], [0, φ̂]] for ξ = (ρ, φ) (translation first)."""
+        xi = cls._check_tangent(tangent, "ad")
+        return cls._blocks(skew(xi[..., 3:]), skew(xi[..., :3]))

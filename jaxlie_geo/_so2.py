@@ -95,9 +95,23 @@ class SO2(SOBase):
     def adjoint(self) -> jax.Array:
         return jnp.ones((*self.get_batch_axes(), 1, 1), self.unit_complex.dtype)
 
+    @classmethod
     @override
-    def jlog(self) -> jax.Array:
-        return jnp.ones((*self.get_batch_axes(), 1, 1), self.unit_complex.dtype)
+    def jac_right(cls, tangent: hints.Array) -> jax.Array:
+        x = cls._check_tangent(tangent, "jac_right")
+        return jnp.ones_like(x)[..., None]
+
+    @classmethod
+    @override
+    def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
+        x = cls._check_tangent(tangent, "jac_right_inv")
+        return jnp.ones_like(x)[..., None]
+
+    @classmethod
+    @override
+    def ad(cls, tangent: hints.Array) -> jax.Array:
+        x = cls._check_tangent(tangent, "ad")
+        return jnp.zeros_like(x)[..., None]
 
     # -- operations -----------------------------------------------------------------
 

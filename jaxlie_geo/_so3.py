@@ -77,12 +77,29 @@ def rotate(wxyz: jax.Array, p: jax.Array) -> jax.Array:
     return p + 2.0 * (w * uxp + cross(u, uxp))
 
 
+def skew_sq(w: jax.Array) -> jax.Array:
+    """ŵ² = w wᵀ − ‖w‖² I, without a matrix product."""
+    outer = w[..., :, None] * w[..., None, :]
+    return outer - sq_norm(w)[..., None, None] * jnp.eye(3, dtype=w.dtype)
+
+
+def jac_right_so3(omega: jax.Array) -> jax.Array:
+    """Right Jacobian of SO(3), J_r(ω) = I − F1(θ²) ω̂ + F2(θ²) ω̂² (Solà et al. 2018,
+    eq. 143; seed 001's F1, F2): ``(*batch, 3) -> (*batch, 3, 3)``."""
+    x = sq_norm(omega)
+    eye = jnp.eye(3, dtype=omega.dtype)
+    return (
+        eye
+        - _scalar.F1(x)[..., None, None] * skew(omega)
+        + _scalar.F2(x)[..., None, None] * skew_sq(omega)
+    )
+
+
 def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
     """Inverse right Jacobian of SO(3), J_r⁻¹(ω) = I + ½ ω̂ + G(θ²) ω̂²
-    (Solà et al. 2018, eq. 146; G from _scalar): ``(*batch, 3) -> (*batch, 3, 3)``."""
-    W = skew(omega)
+    (Solà et al. 2018, eq. 144; G from _scalar): ``(*batch, 3) -> (*batch, 3, 3)``."""
     eye = jnp.eye(3, dtype=omega.dtype)
-    return eye + 0.5 * W + _scalar.G(sq_norm(omega))[..., None, None] * (W @ W)
+    return eye + 0.5 * skew(omega) + _scalar.G(sq_norm(omega))[..., None, None] * skew_sq(omega)
 
 
 @jax.tree_util.register_dataclass
@@ -261,9 +278,20 @@ class SO3(SOBase):
     def adjoint(self) -> jax.Array:
         return self.as_matrix()
 
+    @classmethod
     @override
-    def jlog(self) -> jax.Array:
-        return jac_right_inv_so3(self.log())
+    def jac_right(cls, tangent: hints.Array) -> jax.Array:
+        return jac_right_so3(cls._check_tangent(tangent, "jac_right"))
+
+    @classmethod
+    @override
+    def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
+        return jac_right_inv_so3(cls._check_tangent(tangent, "jac_right_inv"))
+
+    @classmethod
+    @override
+    def ad(cls, tangent: hints.Array) -> jax.Array:
+        return skew(cls._check_tangent(tangent, "ad"))
 
     # -- operations -----------------------------------------------------------------
 
