@@ -1,0 +1,151 @@
+"""Uncertain poses: covariances in the right tangent space, first-order propagation,
+sampling, and the mean of a set of poses.
+
+Convention: an uncertain element is ``T̄ @ exp(δ)``, ``δ ~ N(0, Σ)``, with Σ of shape
+``(*batch, k, k)`` in the tangent's own order — ``(v, ω)`` for SE(3), ``(vx, vy, θ)`` for
+SE(2). GTSAM orders SE(3) covariances ``(ω, v)``: permute blocks when exchanging them.
+Propagation is first order through the Jacobians of ``jaxlie_geo.jacobians``
+(Barfoot & Furgale 2014, §III; Solà et al. 2018, §IV-C).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional, Tuple, TypeVar
+
+import jax
+import jax.numpy as jnp
+
+from . import hints, jacobians
+from ._base import MatrixLieGroup, as_float_array, resolve_dtype
+
+GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+
+
+def _sandwich(J: jax.Array, cov: jax.Array) -> jax.Array:
+    return J @ cov @ jnp.swapaxes(J, -1, -2)
+
+
+def _check_cov(T: MatrixLieGroup, cov: hints.Array, name: str, where: str) -> jax.Array:
+    k = T.tangent_dim
+    return as_float_array(cov, name, (k, k), where)
+
+
+def propagate_compose(
+    a: GroupT,
+    cov_a: hints.Array,
+    b: GroupT,
+    cov_b: hints.Array,
+    cov_ab: Optional[hints.Array] = None,
+) -> jax.Array:
+    """Covariance of ``a @ b``: ``J_a Σ_a J_aᵀ + J_b Σ_b J_bᵀ + J_a Σ_ab J_bᵀ + (…)ᵀ`` with
+    ``J_a = Ad(b⁻¹)``, ``J_b = I``. ``cov_ab`` = E[δ_a δ_bᵀ] for correlated operands
+    (default: independent)."""
+    cov_a = _check_cov(a, cov_a, "cov_a", "propagate_compose")
+    cov_b = _check_cov(b, cov_b, "cov_b", "propagate_compose")
+    J_a, J_b = jacobians.compose(a, b)
+    out = _sandwich(J_a, cov_a) + _sandwich(J_b, cov_b)
+    if cov_ab is not None:
+        cov_ab = _check_cov(a, cov_ab, "cov_ab", "propagate_compose")
+        cross = J_a @ cov_ab @ jnp.swapaxes(J_b, -1, -2)
+        out = out + cross + jnp.swapaxes(cross, -1, -2)
+    return out
+
+
+def propagate_inverse(a: GroupT, cov_a: hints.Array) -> jax.Array:
+    """Covariance of ``a⁻¹``: ``Ad(a) Σ Ad(a)ᵀ``."""
+    cov_a = _check_cov(a, cov_a, "cov_a", "propagate_inverse")
+    return _sandwich(jacobians.inverse(a), cov_a)
+
+
+def propagate_apply(
+    T: GroupT, cov_T: hints.Array, points: hints.Array, cov_points: Optional[hints.Array] = None
+) -> jax.Array:
+    """Covariance of the point ``T @ p`` (additive, ``(*batch, space_dim, space_dim)``) from
+    the pose's tangent covariance and, optionally, the point's own."""
+    cov_T = _check_cov(T, cov_T, "cov_T", "propagate_apply")
+    J_T, J_p = jacobians.apply(T, points)
+    out = _sandwich(J_T, cov_T)
+    if cov_points is not None:
+        d = T.space_dim
+        cov_points = as_float_array(cov_points, "cov_points", (d, d), "propagate_apply")
+        out = out + _sandwich(J_p, cov_points)
+    return out
+
+
+def sample(
+    key: jax.Array,
+    mean: GroupT,
+    cov: hints.Array,
+    batch_axes: Tuple[int, ...] = (),
+) -> GroupT:
+    """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky).
+
+    Returns a batch of shape ``(*batch_axes, *mean.get_batch_axes())``."""
+    cov = _check_cov(mean, cov, "cov", "sample")
+    G = type(mean)
+    dtype = jnp.result_type(mean.parameters(), cov)
+    L = jnp.linalg.cholesky(cov.astype(dtype))
+    batch = jnp.broadcast_shapes(mean.get_batch_axes(), L.shape[:-2])
+    z = jax.random.normal(key, (*batch_axes, *batch, G.tangent_dim), dtype=resolve_dtype(dtype))
+    return mean.multiply(G.exp(jnp.einsum("...ij,...j->...i", L, z)))
+
+
+def mean(
+    poses: GroupT,
+    weights: Optional[hints.Array] = None,
+    *,
+    init: Optional[GroupT] = None,
+    tol: Optional[float] = None,
+    max_iters: int = 50,
+) -> GroupT:
+    """Weighted mean of a batch of elements along their first batch axis, by the fixed-point
+    iteration ``μ ← μ @ exp(Σ wᵢ log(μ⁻¹ xᵢ))`` (the right-invariant-residual mean, well
+    defined on SE(3), which has no bi-invariant metric).
+
+    Args:
+        poses: elements with batch ``(N, *rest)``; the mean is taken over the N axis.
+        weights: shape ``(N,)``, non-negative; normalised to sum 1 (default: uniform).
+        init: starting point, batch ``rest`` (default: ``poses[0]``).
+        tol: stop once the update's norm is below it (default: 10·eps of the dtype).
+        max_iters: cap on the iterations (jit-able ``lax.while_loop``).
+    Returns:
+        The mean, batch ``rest``. Meaningful when the poses lie within a ball where
+        ``log`` is unique (rotations less than π apart).
+    """
+    G = type(poses)
+    n = poses.get_batch_axes()[0] if poses.get_batch_axes() else None
+    if n is None:
+        raise ValueError("mean: `poses` must have at least one batch axis (the one averaged).")
+    dtype = poses.parameters().dtype
+    if weights is None:
+        w = jnp.full((n,), 1.0 / n, dtype)
+    else:
+        w = as_float_array(weights, "weights", (), "mean").astype(dtype)
+        if w.shape != (n,):
+            raise ValueError(f"mean: `weights` must have shape ({n},), got {w.shape}.")
+        w = w / jnp.sum(w)
+    tol_ = float(10 * jnp.finfo(dtype).eps) if tol is None else tol
+    mu0 = poses[0] if init is None else init
+    extra = (1,) * (poses.parameters().ndim - 2)
+
+    def step(mu: GroupT) -> Tuple[GroupT, jax.Array]:
+        r = mu.inverse()[None].multiply(poses).log()  # (N, *rest, k)
+        delta = jnp.sum(w.reshape((n, *extra, 1)) * r, axis=0)
+        return mu.multiply(G.exp(delta)), jnp.max(jnp.abs(delta))
+
+    def cond(state: Tuple[Any, jax.Array, jax.Array]) -> jax.Array:
+        _, size, i = state
+        return (size > tol_) & (i < max_iters)
+
+    def body(state: Tuple[Any, jax.Array, jax.Array]) -> Tuple[Any, jax.Array, jax.Array]:
+        mu, _, i = state
+        mu, size = step(mu)
+        return mu, size, i + 1
+
+    mu, _, _ = jax.lax.while_loop(
+        cond, body, (mu0, jnp.asarray(jnp.inf, dtype), jnp.asarray(0))
+    )
+    return mu
+
+
+__all__ = ["propagate_compose", "propagate_inverse", "propagate_apply", "sample", "mean"]
