@@ -7,6 +7,7 @@ closed-form vector kernels, ``hat``/``vee``, geodesics and batch indexing.
 from . import hints as hints
 from . import jacobians as jacobians
 from . import manifold as manifold
+from . import motion as motion
 from . import uncertainty as uncertainty
 from . import utils as utils
 from ._base import MatrixLieGroup as MatrixLieGroup
