@@ -23,6 +23,43 @@ from ._so3 import (
 )
 
 
+def _dot(a: jax.Array, b: jax.Array) -> jax.Array:
+    return jnp.sum(a * b, axis=-1, keepdims=True)
+
+
+def exp_translation(v: jax.Array, w: jax.Array, form: str = "textbook") -> jax.Array:
+    """t = V(ω) v, θ = ‖ω‖, in one of two algebraically equal forms:
+
+    * ``"textbook"``: v + F1 (ω × v) + F2 ω × (ω × v) (seed 001 eq. 36, Barfoot eq. 7.82);
+    * ``"seed000"``: (R − I)(v × ω)/θ² + (vᵀω)ω/θ² (seed 000 §8.4 with ω = θ·axis), which
+      with ω × (v × ω) = θ² v⊥ reduces to F0 v + F1 (ω × v) + F2 (ω·v) ω — no 0/0 left.
+    """
+    x = sq_norm(w)
+    wxv = cross(w, v)
+    f1, f2 = _scalar.F1(x)[..., None], _scalar.F2(x)[..., None]
+    if form == "seed000":
+        return _scalar.sinc(x)[..., None] * v + f1 * wxv + f2 * _dot(w, v) * w
+    return v + f1 * wxv + f2 * cross(w, wxv)
+
+
+def log_translation(t: jax.Array, w: jax.Array, form: str = "textbook") -> jax.Array:
+    """v = V(ω)⁻¹ t for the principal log (θ ≤ π), in two algebraically equal forms:
+
+    * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot eq. 7.85, G from _scalar);
+    * ``"seed000"``: (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (seed 000 §9), i.e.
+      h t − ½ ω × t + G (ω·t) ω with h = (θ/2)cot(θ/2) = 1 − θ²G.
+    """
+    x = sq_norm(w)
+    g = _scalar.G_principal(x)[..., None]
+    wxt = cross(w, t)
+    if form == "seed000":
+        return (1.0 - x[..., None] * g) * t - 0.5 * wxt + g * _dot(w, t) * w
+    return t - 0.5 * wxt + g * cross(w, wxt)
+
+
+_KERNEL_FORM = "textbook"  # chosen by benchmarks/se3_kernels.py; see benchmarks/RESULTS.md
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class SE3(SEBase[SO3]):
@@ -49,9 +86,7 @@ class SE3(SEBase[SO3]):
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
         xi = cls._check_tangent(tangent)
         v, w = xi[..., :3], xi[..., 3:]
-        x = sq_norm(w)
-        wxv = cross(w, v)
-        t = v + _scalar.F1(x)[..., None] * wxv + _scalar.F2(x)[..., None] * cross(w, wxv)
+        t = exp_translation(v, w, _KERNEL_FORM)
         return SE3(jnp.concatenate([exp_quaternion(w), t], axis=-1))
 
     @override
@@ -60,10 +95,7 @@ class SE3(SEBase[SO3]):
         G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
         p = self.wxyz_xyz
         w = log_quaternion(p[..., :4])
-        t = p[..., 4:]
-        wxt = cross(w, t)
-        v = t - 0.5 * wxt + _scalar.G_principal(sq_norm(w))[..., None] * cross(w, wxt)
-        return jnp.concatenate([v, w], axis=-1)
+        return jnp.concatenate([log_translation(p[..., 4:], w, _KERNEL_FORM), w], axis=-1)
 
     @classmethod
     @override
