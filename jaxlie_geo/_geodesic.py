@@ -15,7 +15,7 @@ GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
 
 @jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class Geodesic(Generic[GroupT]):
     """The geodesic ``t ↦ start @ exp(t · tangent)``, a pytree (jit/vmap friendly).
 

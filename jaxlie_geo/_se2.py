@@ -14,7 +14,7 @@ from ._so2 import SO2
 
 
 @jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class SE2(SEBase[SO2]):
     """Special Euclidean group of planar rigid transforms ``x ↦ R x + t``.
 

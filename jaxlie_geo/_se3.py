@@ -61,7 +61,7 @@ _KERNEL_FORM = "textbook"  # chosen by benchmarks/se3_kernels.py; see benchmarks
 
 
 @jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class SE3(SEBase[SO3]):
     """Special Euclidean group of 3D rigid transforms ``x ↦ R x + t``.
 

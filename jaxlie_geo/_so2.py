@@ -14,7 +14,7 @@ from ._base import SOBase, as_float_array, resolve_dtype
 
 
 @jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class SO2(SOBase):
     """Special orthogonal group of planar rotations.
 

@@ -103,7 +103,7 @@ def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
 
 
 @jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class SO3(SOBase):
     """Special orthogonal group of 3D rotations.
 

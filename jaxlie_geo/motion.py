@@ -72,7 +72,7 @@ def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
 
 
 @jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class Arc:
     """The planar path of ``pose_at(start, velocity, t)`` for SE(2), in the world frame.
 
