@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Optional, Tuple
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +17,7 @@ from ._so3 import (
     exp_quaternion,
     jac_right_inv_so3,
     jac_right_so3,
-    log_quaternion,
+    log_quaternion_and_h,
     skew,
     skew_sq,
     sq_norm,
@@ -27,37 +28,53 @@ def _dot(a: jax.Array, b: jax.Array) -> jax.Array:
     return jnp.sum(a * b, axis=-1, keepdims=True)
 
 
-def exp_translation(v: jax.Array, w: jax.Array, form: str = "textbook") -> jax.Array:
+def exp_translation(
+    v: jax.Array,
+    w: jax.Array,
+    form: str = "seed000",
+    theta_sq: Optional[Tuple[jax.Array, jax.Array]] = None,
+) -> jax.Array:
     """t = V(ω) v, θ = ‖ω‖, in one of two algebraically equal forms:
 
     * ``"textbook"``: v + F1 (ω × v) + F2 ω × (ω × v) (seed 001 eq. 36, Barfoot eq. 7.82);
+      beyond π, v and θ²F2·v ≈ v cancel to the much shorter t (14 ulp at θ ≈ 29);
     * ``"seed000"``: (R − I)(v × ω)/θ² + (vᵀω)ω/θ² (seed 000 §8.4 with ω = θ·axis), which
-      with ω × (v × ω) = θ² v⊥ reduces to F0 v + F1 (ω × v) + F2 (ω·v) ω — no 0/0 left.
+      with ω × (v × ω) = θ² v⊥ reduces to F0 v + F1 (ω × v) + F2 (ω·v) ω — no 0/0 left and
+      no cancellation at large angles (F0 = sin θ/θ is computed directly).
+
+    ``theta_sq``: θ² as a compensated (hi, lo) pair (``_scalar.sq_norm_compensated``),
+    which keeps F0 and F1 accurate far beyond π.
     """
-    x = sq_norm(w)
+    x, x_lo = _scalar.sq_norm_compensated(w) if theta_sq is None else theta_sq
     wxv = cross(w, v)
-    f1, f2 = _scalar.F1(x)[..., None], _scalar.F2(x)[..., None]
+    half = _scalar.sinc(0.25 * x, 0.25 * x_lo)
+    f1, f2 = (0.5 * half * half)[..., None], _scalar.F2(x)[..., None]
     if form == "seed000":
-        return _scalar.sinc(x)[..., None] * v + f1 * wxv + f2 * _dot(w, v) * w
+        return _scalar.sinc(x, x_lo)[..., None] * v + f1 * wxv + f2 * _dot(w, v) * w
     return v + f1 * wxv + f2 * cross(w, wxv)
 
 
-def log_translation(t: jax.Array, w: jax.Array, form: str = "textbook") -> jax.Array:
-    """v = V(ω)⁻¹ t for the principal log (θ ≤ π), in two algebraically equal forms:
+def log_translation(
+    t: jax.Array, w: jax.Array, h: jax.Array, form: str = "seed000"
+) -> jax.Array:
+    """v = V(ω)⁻¹ t for the principal log (θ ≤ π), h = (θ/2)cot(θ/2) given (from the
+    quaternion, see ``log_quaternion_and_h``), in two algebraically equal forms:
 
-    * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot eq. 7.85, G from _scalar);
-    * ``"seed000"``: (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (seed 000 §9), i.e.
-      h t − ½ ω × t + G (ω·t) ω with h = (θ/2)cot(θ/2) = 1 − θ²G.
+    * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot eq. 7.85, G from _scalar); the
+      last term cancels t⊥ near π, where h → 0 (5 ulp measured at π − 1e-3, |t| = 1e3);
+    * ``"seed000"``: (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (seed 000 §9), evaluated as
+      h t − ½ ω × t + G (ω·t) ω (= h t⊥ + t∥ − ½ ω × t: two non-negative multiples of t∥,
+      no cancellation).
     """
     x = sq_norm(w)
     g = _scalar.G_principal(x)[..., None]
     wxt = cross(w, t)
     if form == "seed000":
-        return (1.0 - x[..., None] * g) * t - 0.5 * wxt + g * _dot(w, t) * w
+        return h[..., None] * t - 0.5 * wxt + g * _dot(w, t) * w
     return t - 0.5 * wxt + g * cross(w, wxt)
 
 
-_KERNEL_FORM = "textbook"  # chosen by benchmarks/se3_kernels.py; see benchmarks/RESULTS.md
+_KERNEL_FORM = "seed000"  # more accurate (see the docstrings); speed in benchmarks/RESULTS.md
 
 
 @jax.tree_util.register_dataclass
@@ -86,16 +103,17 @@ class SE3(SEBase[SO3]):
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
         xi = cls._check_tangent(tangent)
         v, w = xi[..., :3], xi[..., 3:]
-        t = exp_translation(v, w, _KERNEL_FORM)
-        return SE3(jnp.concatenate([exp_quaternion(w), t], axis=-1))
+        theta_sq = _scalar.sq_norm_compensated(w)
+        t = exp_translation(v, w, _KERNEL_FORM, theta_sq)
+        return SE3(jnp.concatenate([exp_quaternion(w, theta_sq), t], axis=-1))
 
     @override
     def log(self) -> jax.Array:
         """ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
         G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
         p = self.wxyz_xyz
-        w = log_quaternion(p[..., :4])
-        return jnp.concatenate([log_translation(p[..., 4:], w, _KERNEL_FORM), w], axis=-1)
+        w, h = log_quaternion_and_h(p[..., :4])
+        return jnp.concatenate([log_translation(p[..., 4:], w, h, _KERNEL_FORM), w], axis=-1)
 
     @classmethod
     @override

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Tuple
+from typing import Any, Optional, Tuple
 
 import jax
 import jax.numpy as jnp
@@ -34,11 +34,17 @@ def sq_norm(w: jax.Array) -> jax.Array:
     return jnp.sum(w * w, axis=-1)
 
 
-def exp_quaternion(omega: jax.Array) -> jax.Array:
-    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖, from kernels of θ²/4."""
-    x4 = 0.25 * sq_norm(omega)
-    w = _scalar.cos_(x4)
-    xyz = (0.5 * _scalar.sinc(x4))[..., None] * omega
+def exp_quaternion(
+    omega: jax.Array, theta_sq: Optional[Tuple[jax.Array, jax.Array]] = None
+) -> jax.Array:
+    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖, from kernels of θ²/4.
+
+    θ² is formed compensated (hi + lo; pass ``theta_sq`` to reuse one) so that angles far
+    beyond π keep full accuracy (with a plain θ², 5 ulp at θ ≈ 16; see _scalar)."""
+    hi, lo = _scalar.sq_norm_compensated(omega) if theta_sq is None else theta_sq
+    x4, x4_lo = 0.25 * hi, 0.25 * lo
+    w = _scalar.cos_(x4, x4_lo)
+    xyz = (0.5 * _scalar.sinc(x4, x4_lo))[..., None] * omega
     return jnp.concatenate([w[..., None], xyz], axis=-1)
 
 
@@ -47,11 +53,19 @@ def log_quaternion(wxyz: jax.Array) -> jax.Array:
     after the sign choice w ≥ 0, so the angle is in [0, π]. The quaternion atan2 form is
     accurate up to and at π (no acos, no snapping); at w = 0 exactly (angle π) the stored
     vector part gives the axis."""
+    return log_quaternion_and_h(wxyz)[0]
+
+
+def log_quaternion_and_h(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array]:
+    """``log_quaternion`` and h = (θ/2)cot(θ/2), read off the same quaternion as
+    h = |w| · atan2(n, |w|)/n (= cos(θ/2) · (θ/2)/sin(θ/2) for a unit quaternion): no
+    cancellation anywhere on [0, π], unlike 1 − θ² G, which cancels as h → 0 near π."""
     w = wxyz[..., 0]
     v = wxyz[..., 1:]
     sign = jnp.where(w < 0, -1.0, 1.0).astype(wxyz.dtype)
-    scale = 2.0 * sign * _scalar.atan2_over(sq_norm(v), sign * w)
-    return scale[..., None] * v
+    ratio = _scalar.atan2_over(sq_norm(v), sign * w)
+    h = sign * w * ratio / jnp.sqrt(sq_norm(wxyz))  # the norm: h is scale-invariant
+    return (2.0 * sign * ratio)[..., None] * v, h
 
 
 def quaternion_product(p: jax.Array, q: jax.Array) -> jax.Array:

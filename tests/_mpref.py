@@ -1,0 +1,584 @@
+"""Shared accuracy harness: mpmath references, input regimes and the ulp error measure.
+
+Used by tests/test_accuracy.py (assertions on jaxlie_geo) and benchmarks/accuracy.py
+(the same measurement, jaxlie_geo next to jaxlie 1.5). Everything a number in the
+accuracy table depends on lives here, so the test and the table cannot drift apart.
+
+Inputs. For every group, dtype, angle regime and translation size we draw ``n_per``
+tangents with a fixed seed: a random unit direction (SO3/SE3) or a random sign
+(SO2/SE2) times an angle drawn log-uniformly inside the regime's band (the first two
+samples are the band's end points), and a translation of exactly the given norm in a
+random direction. The tangent is rounded to the dtype and subnormal components are
+flushed to zero (XLA on CPU flushes subnormals, so the flushed value is what the
+function receives): that *stored* tangent is the input of exp and of the derivative
+checks. The input of log is the group element whose parameters are the exact exp of the
+stored tangent rounded to the dtype (again flushed): a stored element, identical for
+every library, not a round trip through any library's exp.
+
+References (mpmath, ``DPS`` = 60 digits, from the stored floats, which convert exactly):
+  SO2 exp   (cos θ, sin θ)
+  SE2 exp   (cos θ, sin θ, V v),  V = [[A, −B], [B, A]],  A = sin θ/θ,  B = (1 − cos θ)/θ
+  SO3 exp   (cos(θ/2), sin(θ/2)/θ · ω),  θ = ‖ω‖ (w < 0 for θ > π, as exp gives it)
+  SE3 exp   (q, v + F1 ω×v + F2 ω×(ω×v)),  F1 = (1 − cos θ)/θ²,  F2 = (θ − sin θ)/θ³
+  SO2 log   atan2(s, c)
+  SE2 log   θ = atan2(s, c),  v = [[h, θ/2], [−θ/2, h]] t,  h = (θ/2) cot(θ/2)
+  SO3 log   principal: q ← q/‖q‖, q ← −q if w < 0, θ = 2 atan2(‖q_xyz‖, w), ω = θ q_xyz/‖q_xyz‖
+  SE3 log   ω as SO3, v = t − ½ ω×t + G ω×(ω×t),  G = (1 − (θ/2)cot(θ/2))/θ²
+The stored rotation parameters are normalised in mpmath before the log (the atan2 forms
+are scale invariant anyway, so this only fixes the meaning); the translation is used as
+stored. F1, F2 and G, whose closed forms cancel catastrophically near 0 (1 − cos θ at 50
+digits is pure noise below θ ≈ 1e-25), are evaluated from their exact power series for
+θ < 1/4 (rational and Bernoulli coefficients) and from the closed form at 20 extra digits
+above. ``check_references`` verifies all of this independently (mpmath.expm of the hat
+matrix, series against closed form at high precision, exp∘log round trips).
+
+Error measure (one for every op): per output block (rotation parameters, translation
+parameters; for log the translation and rotation parts of the tangent)
+
+    ulp_err = ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)),
+
+eps = finfo(dtype).eps; a case's error is the max over its blocks; a non-finite output is
+an infinite error. The reference is kept as a double-double (hi + lo) so the measure
+itself is exact to far below 0.01 ulp. Derivative checks: J = d log(exp(x))/dx (jacfwd) must
+be I and H = d² log(exp(x))/dx² (jax.hessian) must be 0; the error is
+max |J − I| / (eps · s) and max |H| / (eps · s), with s = max(1, ‖v‖₂) on the blocks whose
+exact derivative pieces scale with the translation v (output translation differentiated
+w.r.t. rotation only: ∂v_out/∂ω and ∂²v_out/∂ω∂ω), s = 1 elsewhere. Derivatives are
+checked only where log is smooth (angle < π, so not in the beyond_pi regime).
+
+Running: ``evaluate`` jits exp (on stored tangents), log (on stored parameters) and
+vmap(jacfwd / hessian) of log∘exp for one library, float32 with jax_enable_x64 off (so
+no silent promotion can hide float32 rounding), float64 with it on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+from typing import Dict, List, Sequence, Tuple
+
+import mpmath as mp
+import numpy as np
+
+DPS = 60
+GROUPS = ("SO2", "SE2", "SO3", "SE3")
+DTYPES = ("float32", "float64")
+REGIMES = ("zero", "tiny", "small", "mid", "near_pi", "beyond_pi")
+SIZES = (0.0, 1e-6, 1.0, 1e3)
+OPS = ("exp", "log", "jac", "hess")
+# Asserted bounds, in ulp (see module docstring for what is measured).
+BOUNDS = {"exp": 4.0, "log": 4.0, "jac": 8.0, "hess": 64.0}
+# Ops checked in each regime: exp everywhere; log and derivatives only where the angle
+# is below π (the principal log wraps beyond it).
+OPS_IN_REGIME = {r: (("exp",) if r == "beyond_pi" else OPS) for r in REGIMES}
+
+REGIME_TEXT = {
+    "zero": "θ = 0",
+    "tiny": "1e-30 ≤ θ ≤ 1e-6",
+    "small": "1e-5 ≤ θ ≤ 0.1",
+    "mid": "0.1 ≤ θ ≤ 3",
+    "near_pi": "π−1e-2 ≤ θ ≤ π−1e-7 (f32: π−2e-6)",
+    "beyond_pi": "π ≤ θ ≤ 10π (exp only)",
+}
+
+TANGENT_DIM = {"SO2": 1, "SE2": 3, "SO3": 3, "SE3": 6}
+PARAM_DIM = {"SO2": 2, "SE2": 4, "SO3": 4, "SE3": 7}
+# Index sets: tangent translation / rotation parts, and output blocks of exp and log.
+TAN_V = {"SO2": [], "SE2": [0, 1], "SO3": [], "SE3": [0, 1, 2]}
+TAN_W = {"SO2": [0], "SE2": [2], "SO3": [0, 1, 2], "SE3": [3, 4, 5]}
+EXP_BLOCKS = {"SO2": [[0, 1]], "SE2": [[0, 1], [2, 3]], "SO3": [[0, 1, 2, 3]],
+              "SE3": [[0, 1, 2, 3], [4, 5, 6]]}
+LOG_BLOCKS = {g: [b for b in (TAN_V[g], TAN_W[g]) if b] for g in GROUPS}
+EXP_BLOCK_NAMES = {"SO2": ["rot"], "SE2": ["rot", "trans"], "SO3": ["rot"],
+                   "SE3": ["rot", "trans"]}
+LOG_BLOCK_NAMES = {"SO2": ["ω"], "SE2": ["v", "ω"], "SO3": ["ω"], "SE3": ["v", "ω"]}
+TANGENT_NAMES = {"SO2": ["θ"], "SE2": ["vx", "vy", "θ"], "SO3": ["ωx", "ωy", "ωz"],
+                 "SE3": ["vx", "vy", "vz", "ωx", "ωy", "ωz"]}
+
+
+def angle_band(regime: str, dtype: str) -> Tuple[float, float]:
+    """(lo, hi) of the rotation angle θ in a regime (for near_pi: of π − θ)."""
+    pi = math.pi
+    return {
+        "zero": (0.0, 0.0),
+        "tiny": (1e-30, 1e-6),
+        "small": (1e-5, 0.1),
+        "mid": (0.1, 3.0),
+        # one float32 step at π is 2.4e-7: stop at π − 2e-6 there.
+        "near_pi": (2e-6 if dtype == "float32" else 1e-7, 1e-2),
+        "beyond_pi": (pi, 10 * pi),
+    }[regime]
+
+
+def flush(x: np.ndarray) -> np.ndarray:
+    """What XLA on CPU sees: subnormals flushed to (signed) zero."""
+    tiny = np.finfo(x.dtype).tiny
+    return np.where(np.abs(x) < tiny, np.zeros_like(x) * np.sign(x), x).astype(x.dtype)
+
+
+# --- mpmath scalar functions (exact near 0) ----------------------------------------------
+
+
+def _series(coef, t2, tol) -> mp.mpf:
+    s, k, p = mp.mpf(0), 0, mp.mpf(1)
+    while True:
+        term = coef(k) * p
+        s += term
+        if k > 2 and abs(term) < tol:
+            return s
+        k += 1
+        p *= t2
+
+
+_BERN = {}
+
+
+def _bern_coef(k: int) -> mp.mpf:  # |B_{2k+2}| / (2k+2)!
+    if k not in _BERN:
+        _BERN[k] = abs(mp.bernoulli(2 * k + 2)) / mp.factorial(2 * k + 2)
+    return _BERN[k]
+
+
+SERIES_BELOW = mp.mpf("0.25")
+
+
+def F1(t: mp.mpf, series: bool | None = None) -> mp.mpf:
+    """(1 − cos θ)/θ² = Σ (−1)^k θ^{2k}/(2k+2)!"""
+    if series if series is not None else t < SERIES_BELOW:
+        return _series(lambda k: (-1) ** k / mp.factorial(2 * k + 2), t * t, mp.eps * 1e-5)
+    with mp.extradps(20):
+        return 2 * mp.sin(t / 2) ** 2 / t**2
+
+
+def F2(t: mp.mpf, series: bool | None = None) -> mp.mpf:
+    """(θ − sin θ)/θ³ = Σ (−1)^k θ^{2k}/(2k+3)!"""
+    if series if series is not None else t < SERIES_BELOW:
+        return _series(lambda k: (-1) ** k / mp.factorial(2 * k + 3), t * t, mp.eps * 1e-5)
+    with mp.extradps(20):
+        return (t - mp.sin(t)) / t**3
+
+
+def G(t: mp.mpf, series: bool | None = None) -> mp.mpf:
+    """(1 − (θ/2) cot(θ/2))/θ² = Σ |B_{2k+2}| θ^{2k}/(2k+2)!  (θ < 2π)"""
+    if series if series is not None else t < SERIES_BELOW:
+        return _series(_bern_coef, t * t, mp.eps * 1e-5)
+    with mp.extradps(20):
+        return (1 - (t / 2) * mp.cot(t / 2)) / t**2
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _mpf_list(x) -> List[mp.mpf]:
+    """Stored floats (any numpy float, converted exactly) or mpf values, as mpf."""
+    return [c if isinstance(c, mp.mpf) else mp.mpf(float(c)) for c in x]
+
+
+def _norm(a):
+    return mp.sqrt(mp.fsum(x * x for x in a))
+
+
+def exp_ref(group: str, x: Sequence[float]) -> List[mp.mpf]:
+    """Exact group parameters of exp(x) (x: stored floats)."""
+    x = _mpf_list(x)
+    if group in ("SO2", "SE2"):
+        th = x[-1]
+        c, s = mp.cos(th), mp.sin(th)
+        if group == "SO2":
+            return [c, s]
+        A = s / th if th != 0 else mp.mpf(1)
+        B = th * F1(abs(th))  # (1 − cos θ)/θ, odd in θ
+        vx, vy = x[0], x[1]
+        return [c, s, A * vx - B * vy, B * vx + A * vy]
+    w = x[-3:]
+    th = _norm(w)
+    half_sinc = mp.sin(th / 2) / th if th != 0 else mp.mpf(0.5)
+    q = [mp.cos(th / 2)] + [half_sinc * c for c in w]
+    if group == "SO3":
+        return q
+    v = x[:3]
+    wxv = _cross(w, v)
+    wwxv = _cross(w, wxv)
+    f1, f2 = F1(th), F2(th)
+    return q + [v[i] + f1 * wxv[i] + f2 * wwxv[i] for i in range(3)]
+
+
+def log_ref(group: str, p: Sequence[float]) -> List[mp.mpf]:
+    """Exact principal log of the element with (stored) parameters p."""
+    p = _mpf_list(p)
+    if group in ("SO2", "SE2"):
+        r = mp.sqrt(p[0] ** 2 + p[1] ** 2)
+        c, s = p[0] / r, p[1] / r
+        th = mp.atan2(s, c)
+        if group == "SO2":
+            return [th]
+        tx, ty = p[2], p[3]
+        half = th / 2
+        h = half * mp.cos(half) / mp.sin(half) if th != 0 else mp.mpf(1)
+        return [h * tx + half * ty, -half * tx + h * ty, th]
+    q = p[:4]
+    r = _norm(q)
+    q = [c / r for c in q]
+    if q[0] < 0:
+        q = [-c for c in q]
+    n = _norm(q[1:])
+    if n == 0:
+        w = [mp.mpf(0)] * 3
+        th = mp.mpf(0)
+    else:
+        th = 2 * mp.atan2(n, q[0])
+        w = [th / n * c for c in q[1:]]
+    if group == "SO3":
+        return w
+    t = p[4:]
+    wxt = _cross(w, t)
+    wwxt = _cross(w, wxt)
+    g = G(th)
+    return [t[i] - wxt[i] / 2 + g * wwxt[i] for i in range(3)] + w
+
+
+def hat(group: str, x: Sequence) -> mp.matrix:
+    """Lie algebra matrix of a tangent (jaxlie ordering: translation first)."""
+    x = _mpf_list(x)
+    if group == "SO2":
+        return mp.matrix([[0, -x[0]], [x[0], 0]])
+    if group == "SE2":
+        return mp.matrix([[0, -x[2], x[0]], [x[2], 0, x[1]], [0, 0, 0]])
+    w = x[-3:]
+    S = mp.matrix([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    if group == "SO3":
+        return S
+    M = mp.zeros(4, 4)
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = S[i, j]
+        M[i, 3] = x[i]
+    return M
+
+
+def params_to_matrix(group: str, p: Sequence) -> mp.matrix:
+    """Homogeneous matrix of a parameter vector (mpf entries, quaternion assumed unit)."""
+    if group in ("SO2", "SE2"):
+        c, s = p[0], p[1]
+        if group == "SO2":
+            return mp.matrix([[c, -s], [s, c]])
+        return mp.matrix([[c, -s, p[2]], [s, c, p[3]], [0, 0, 1]])
+    w, x, y, z = p[:4]
+    R = mp.matrix([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+    if group == "SO3":
+        return R
+    M = mp.eye(4)
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = R[i, j]
+        M[i, 3] = p[4 + i]
+    return M
+
+
+def _maxabs(M: mp.matrix) -> mp.mpf:
+    return max(abs(M[i, j]) for i in range(M.rows) for j in range(M.cols))
+
+
+def check_references(verbose: bool = False) -> float:
+    """Independent checks of the references; returns the worst relative discrepancy
+    (should be ~1e-45 or below). Raises AssertionError on failure."""
+    worst = mp.mpf(0)
+    rng = np.random.default_rng(12345)
+    with mp.workdps(DPS):
+        # 1. series and closed forms agree where both are accurate (closed form at +60 digits).
+        for t in [mp.mpf("0.05"), mp.mpf("0.2"), mp.mpf("0.3"), mp.mpf(1), mp.mpf(3)]:
+            for f in (F1, F2, G):
+                a = f(t, series=True)
+                with mp.extradps(60):
+                    b = f(t, series=False)
+                worst = max(worst, abs(a - b) / abs(b))
+        # 2. exp against mpmath.expm of the hat matrix.
+        angles = [0.0, 1e-30, 1e-12, 1e-6, 1e-3, 0.2, 1.0, 3.0, math.pi - 1e-7, 5.0, 31.0]
+        for g in GROUPS:
+            for th in angles:
+                x = _random_tangent(g, th, 1.3, rng)
+                ref = params_to_matrix(g, exp_ref(g, x))
+                with mp.extradps(40):
+                    E = mp.expm(hat(g, x), method="taylor")
+                scale = max(1, _maxabs(E))
+                worst = max(worst, _maxabs(ref - E) / scale)
+                # 3. log inverts exp on the principal range (exact parameters in, tangent out).
+                if th < math.pi:
+                    with mp.extradps(20):
+                        p = exp_ref(g, x)
+                    back = log_ref(g, p)
+                    xs = [mp.mpf(float(c)) for c in x]
+                    scale = max(1, max(abs(c) for c in xs))
+                    worst = max(worst, max(abs(a - b) for a, b in zip(back, xs)) / scale)
+        # 4. log of a quaternion at exactly π, and of a non-unit quaternion.
+        p = log_ref("SO3", [0.0, 0.75, 0.0, -1.0])  # |(0.75, 0, -1)| = 1.25 exactly
+        worst = max(worst, abs(p[0] - 3 * mp.pi / 5) + abs(p[2] + 4 * mp.pi / 5))
+        c, s = math.cos(0.5), math.sin(0.5)
+        p = log_ref("SO3", [-2.0 * c, -2.0 * s, 0.0, 0.0])  # scaled, w < 0
+        worst = max(worst, abs(p[0] - 2 * mp.atan2(s, c)))
+    if verbose:
+        print(f"reference self-check: worst discrepancy {float(worst):.3g}")
+    assert worst < mp.mpf(10) ** (-40), f"references disagree: {worst}"
+    return float(worst)
+
+
+# --- inputs --------------------------------------------------------------------------------
+
+
+def _unit(rng, n):
+    u = rng.standard_normal(n)
+    return u / np.linalg.norm(u)
+
+
+def _random_tangent(group, theta, size, rng) -> np.ndarray:
+    """A tangent (float64) with rotation angle theta and translation norm size."""
+    if group in ("SO2", "SE2"):
+        w = np.array([theta * (1.0 if rng.random() < 0.5 else -1.0)])
+    else:
+        w = theta * _unit(rng, 3)
+    if group in ("SO2", "SO3"):
+        return w
+    v = size * _unit(rng, 2 if group == "SE2" else 3)
+    return np.concatenate([v, w])
+
+
+def _angles(regime, dtype, n, rng) -> np.ndarray:
+    lo, hi = angle_band(regime, dtype)
+    if regime == "zero":
+        return np.zeros(n)
+    u = np.concatenate([[0.0, 1.0], rng.random(max(n - 2, 0))])[:n]
+    a = np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))
+    return math.pi - a if regime == "near_pi" else a
+
+
+def _dd(values: Sequence[Sequence[mp.mpf]]) -> Tuple[np.ndarray, np.ndarray]:
+    """Double-double (hi, lo) float64 arrays of mpf rows."""
+    hi = np.array([[float(v) for v in row] for row in values], dtype=np.float64)
+    lo = np.array([[float(v - h) for v, h in zip(row, hrow)] for row, hrow in zip(values, hi)],
+                  dtype=np.float64)
+    return hi, lo
+
+
+@dataclasses.dataclass
+class Cases:
+    """All inputs and references of one (group, dtype)."""
+
+    group: str
+    dtype: str
+    regime: np.ndarray  # (N,) str
+    size: np.ndarray  # (N,) nominal translation norm
+    angle: np.ndarray  # (N,) nominal rotation angle
+    tangent: np.ndarray  # (N, tangent_dim) stored (dtype, flushed): exp / derivative input
+    params: np.ndarray  # (N, parameters_dim) stored exact-exp(tangent): log input
+    exp_hi: np.ndarray
+    exp_lo: np.ndarray
+    log_hi: np.ndarray
+    log_lo: np.ndarray
+    vnorm: np.ndarray  # (N,) ‖v‖₂ of the stored tangent (0 for SO groups)
+
+    def mask(self, op: str) -> np.ndarray:
+        return np.array([op in OPS_IN_REGIME[r] for r in self.regime])
+
+
+def make_cases(group: str, dtype: str, n_per: int = 16, seed: int = 0) -> Cases:
+    dt = np.dtype(dtype)
+    rng = np.random.default_rng([seed, GROUPS.index(group), DTYPES.index(dtype)])
+    sizes = SIZES if group in ("SE2", "SE3") else (0.0,)
+    regime, size, angle, tangents = [], [], [], []
+    for r in REGIMES:
+        for s in sizes:
+            for th in _angles(r, dtype, n_per if r != "zero" else max(2, n_per // 4), rng):
+                tangents.append(_random_tangent(group, th, s, rng))
+                regime.append(r)
+                size.append(s)
+                angle.append(th)
+    tangent = flush(np.array(tangents).astype(dt))
+    with mp.workdps(DPS):
+        exps = [exp_ref(group, x) for x in tangent]
+        params = flush(np.array([[float(c) for c in e] for e in exps]).astype(dt))
+        logs = [log_ref(group, p) if rg != "beyond_pi" else [mp.mpf(0)] * len(x)
+                for p, rg, x in zip(params, regime, tangent)]
+        exp_hi, exp_lo = _dd(exps)
+        log_hi, log_lo = _dd(logs)
+    tv = tangent[:, TAN_V[group]].astype(np.float64)
+    return Cases(group, dtype, np.array(regime), np.array(size), np.array(angle), tangent,
+                 params, exp_hi, exp_lo, log_hi, log_lo, np.sqrt(np.sum(tv * tv, axis=-1)))
+
+
+# --- error measure ---------------------------------------------------------------------------
+
+
+def ulp_errors(got, ref_hi, ref_lo, blocks, dtype, per_block=False):
+    """Per case: max over blocks of ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)), shape (N,);
+    with per_block, also the (N, n_blocks) errors of the blocks."""
+    eps = float(np.finfo(dtype).eps)
+    got = np.asarray(got, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        d = np.abs((got - ref_hi) - ref_lo)
+    d = np.where(np.isfinite(got), d, np.inf)
+    each = np.stack(
+        [np.max(d[:, b], axis=-1) / (eps * np.maximum(1.0, np.max(np.abs(ref_hi[:, b]), axis=-1)))
+         for b in blocks], axis=-1)
+    out = np.max(each, axis=-1)
+    return (out, each) if per_block else out
+
+
+def derivative_scale(group: str, vnorm: np.ndarray, order: int) -> np.ndarray:
+    """s per entry of J (order 1, (N, n, n)) or H (order 2, (N, n, n, n))."""
+    n = TANGENT_DIM[group]
+    s = np.ones((len(vnorm),) + (n,) * (order + 1))
+    big = np.maximum(1.0, vnorm)
+    V, W = TAN_V[group], TAN_W[group]
+    for i in V:
+        for j in W:
+            if order == 1:
+                s[:, i, j] = big
+            else:
+                for k in W:
+                    s[:, i, j, k] = big
+    return s
+
+
+def derivative_errors(got, group, vnorm, order, dtype, with_argmax=False):
+    """max |J − I| / (eps s) (order 1) or max |H| / (eps s) (order 2), per case; with
+    with_argmax, also the flat index of the worst entry."""
+    eps = float(np.finfo(dtype).eps)
+    got = np.asarray(got, dtype=np.float64)
+    n = TANGENT_DIM[group]
+    ref = np.eye(n) if order == 1 else np.zeros((n, n, n))
+    with np.errstate(invalid="ignore", over="ignore"):
+        d = np.abs(got - ref)
+    d = np.where(np.isfinite(got), d, np.inf) / (eps * derivative_scale(group, vnorm, order))
+    d = d.reshape(d.shape[0], -1)
+    out = np.max(d, axis=-1)
+    return (out, np.argmax(d, axis=-1)) if with_argmax else out
+
+
+# --- running a library -----------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def x64_for(dtype: str):
+    """float32 runs with x64 off (what a float32 user has: no silent promotion can hide
+    float32 rounding), float64 with x64 on."""
+    import jax
+
+    if hasattr(jax, "enable_x64"):  # jax >= 0.7
+        ctx = jax.enable_x64(dtype == "float64")
+    else:
+        from jax.experimental import disable_x64, enable_x64
+
+        ctx = enable_x64() if dtype == "float64" else disable_x64()
+    with ctx:
+        yield
+
+
+_FN_CACHE: Dict[Tuple, object] = {}
+
+
+def _functions(lib, group: str, dtype: str):
+    import jax
+
+    key = (lib.__name__, group, dtype)
+    if key not in _FN_CACHE:
+        G = getattr(lib, group)
+
+        def roundtrip(x):
+            return G.exp(x).log()
+
+        _FN_CACHE[key] = {
+            "exp": jax.jit(lambda x: G.exp(x).parameters()),
+            "log": jax.jit(lambda p: G(p).log()),
+            "jac": jax.jit(jax.vmap(jax.jacfwd(roundtrip))),
+            "hess": jax.jit(jax.vmap(jax.hessian(roundtrip))),
+        }
+    return _FN_CACHE[key]
+
+
+def evaluate(lib, cases: Cases, ops: Sequence[str] = OPS) -> Dict[str, np.ndarray]:
+    """Per-case ulp errors of `lib` (a module with SO2/SE2/SO3/SE3) for each op, NaN
+    where an op is not checked in the case's regime; also '<op>_dtype' (the output
+    dtype), '<op>_blocks' (exp/log: per-block errors) and '<op>_argmax' (jac/hess: flat
+    index of the worst entry)."""
+    import jax.numpy as jnp
+
+    g, dt = cases.group, cases.dtype
+    out: Dict[str, np.ndarray] = {}
+    with x64_for(dt):
+        fns = _functions(lib, g, dt)
+        for op in ops:
+            m = cases.mask(op)
+            err = np.full(len(m), np.nan)
+            arg = cases.params[m] if op == "log" else cases.tangent[m]
+            got = fns[op](jnp.asarray(arg))
+            out[op + "_dtype"] = str(got.dtype)
+            got = np.asarray(got)
+            if op in ("exp", "log"):
+                hi, lo = (cases.exp_hi, cases.exp_lo) if op == "exp" else (cases.log_hi,
+                                                                           cases.log_lo)
+                blocks = EXP_BLOCKS[g] if op == "exp" else LOG_BLOCKS[g]
+                e, each = ulp_errors(got, hi[m], lo[m], blocks, dt, per_block=True)
+                extra = np.full((len(m), len(blocks)), np.nan)
+                extra[m] = each
+                out[op + "_blocks"] = extra
+            else:
+                e, where = derivative_errors(got, g, cases.vnorm[m], 1 if op == "jac" else 2,
+                                             dt, with_argmax=True)
+                extra = np.zeros(len(m), dtype=np.int64)
+                extra[m] = where
+                out[op + "_argmax"] = extra
+            err[m] = e
+            out[op] = err
+    return out
+
+
+def worst_by_regime(cases: Cases, errors: np.ndarray) -> Dict[str, Tuple[float, int]]:
+    """regime -> (worst error, case index) over the cases where the op was checked."""
+    res = {}
+    for r in REGIMES:
+        idx = np.nonzero((cases.regime == r) & ~np.isnan(errors))[0]
+        if len(idx):
+            e = np.where(np.isnan(errors[idx]), -1, errors[idx])
+            k = idx[int(np.argmax(e))]
+            res[r] = (float(errors[k]), int(k))
+    return res
+
+
+def block_errors(cases: Cases, k: int, op: str, errors: Dict[str, np.ndarray]) -> str:
+    """Where case k's error sits: per-block errors (exp, log) or the worst entry (jac, hess)."""
+    g = cases.group
+    if op in ("exp", "log"):
+        names = EXP_BLOCK_NAMES[g] if op == "exp" else LOG_BLOCK_NAMES[g]
+        b = errors[op + "_blocks"][k]
+        return "(" + ", ".join(f"{n} {fmt_ulp(float(e))}" for n, e in zip(names, b)) + ")"
+    n = TANGENT_DIM[g]
+    idx = np.unravel_index(int(errors[op + "_argmax"][k]), (n,) * (2 if op == "jac" else 3))
+    c = TANGENT_NAMES[g]
+    if op == "jac":
+        return f"(at d{c[idx[0]]}/d{c[idx[1]]})"
+    return f"(at d²{c[idx[0]]}/d{c[idx[1]]}d{c[idx[2]]})"
+
+
+def describe_case(cases: Cases, k: int, op: str) -> str:
+    x = cases.params[k] if op == "log" else cases.tangent[k]
+    vals = ", ".join(f"{float(c):.17g}" for c in x)
+    what = "params" if op == "log" else "tangent"
+    return (f"angle≈{cases.angle[k]:.6g} |v|={cases.size[k]:g} {what}=[{vals}]")
+
+
+def fmt_ulp(e: float) -> str:
+    if e is None or (isinstance(e, float) and math.isnan(e)):
+        return "–"
+    if not math.isfinite(e):
+        return "non-finite"
+    if e < 10:
+        return f"{e:.2f}"
+    if e < 1000:
+        return f"{e:.0f}"
+    return f"{e:.1e}"
