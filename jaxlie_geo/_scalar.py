@@ -237,19 +237,47 @@ def sinc(x: jax.Array, x_lo: Optional[jax.Array] = None) -> jax.Array:
     return _switched("sinc", x, 1.0, closed)
 
 
+def half_angle(
+    x: jax.Array, x_lo: Optional[jax.Array] = None
+) -> Tuple[jax.Array, jax.Array]:
+    """c = cos(θ/2) and k = sin(θ/2)/(θ/2) for x = θ² (+ x_lo), from one sincos.
+
+    Everything an SO(3)/SE(3) exponential needs follows: the quaternion (c, k ω/2), and
+    F0 = c k, F1 = k²/2, F2 = (1 − c k)/θ² above its switch. Series for θ < 2 (both, as
+    ``cos_``/``sinc`` of θ²/4); above, the closed forms with the first-order correction for
+    a compensated θ² (see ``_sqrt_with_residual``)."""
+    x4 = 0.25 * x
+    small = x4 < 1.0
+    xs = jnp.where(small, x4, 1.0)
+    c_series, k_series = _horner("cos", xs, 1.0), _horner("sinc", xs, 1.0)
+    xd = jnp.where(small, 1.0, x4)
+    if x_lo is None:
+        phi, d = jnp.sqrt(xd), jnp.zeros_like(xd)
+    else:
+        phi, d = _sqrt_with_residual(xd, jnp.where(small, 0.0, 0.25 * x_lo))
+    sn, cs = jnp.sin(phi), jnp.cos(phi)
+    c_closed = cs - sn * d
+    k_closed = (sn + d * (cs - sn / phi)) / phi
+    return jnp.where(small, c_series, c_closed), jnp.where(small, k_series, k_closed)
+
+
 def F1(x: jax.Array) -> jax.Array:
     """F1 = (1 − cos θ)/θ² = ½ sinc(θ/2)², which has no cancellation anywhere."""
     half = sinc(0.25 * x)
     return 0.5 * half * half
 
 
-def F2(x: jax.Array) -> jax.Array:
-    """F2 = (θ − sin θ)/θ³ (seed 001 §11.3; eq. 42's third term is θ⁴/7!).
+def F2(x: jax.Array, f0: Optional[jax.Array] = None) -> jax.Array:
+    """F2 = (θ − sin θ)/θ³ = (1 − F0)/θ² (seed 001 §11.3; eq. 42's third term is θ⁴/7!).
 
     The closed form cancels below θ ≈ 1.7 (1000 ulp at θ = 0.0625 in float32), its
-    derivatives longer still, so the series runs up to x = 10 (θ ≈ 3.16)."""
+    derivatives longer still, so the series runs up to x = 10 (θ ≈ 3.16). Above, with
+    |F0| ≤ 1/θ < 0.32, (1 − F0)/θ² does not cancel; pass ``f0`` = sin θ/θ when it is at
+    hand (from ``half_angle``: c·k) to save a sine."""
 
     def closed(x: jax.Array) -> jax.Array:
+        if f0 is not None:
+            return (1.0 - f0) / x
         theta = jnp.sqrt(x)
         return (theta - jnp.sin(theta)) / (x * theta)
 

@@ -14,6 +14,8 @@ from ._base import SEBase, as_float_array
 from ._so3 import (
     SO3,
     cross,
+    dot,
+    exp_half_angle,
     exp_quaternion,
     jac_right_inv_so3,
     jac_right_so3,
@@ -25,14 +27,14 @@ from ._so3 import (
 
 
 def _dot(a: jax.Array, b: jax.Array) -> jax.Array:
-    return jnp.sum(a * b, axis=-1, keepdims=True)
+    return dot(a, b)[..., None]
 
 
 def exp_translation(
     v: jax.Array,
     w: jax.Array,
     form: str = "seed000",
-    theta_sq: Optional[Tuple[jax.Array, jax.Array]] = None,
+    half: Optional[Tuple[jax.Array, jax.Array]] = None,
 ) -> jax.Array:
     """t = V(ω) v, θ = ‖ω‖, in one of two algebraically equal forms:
 
@@ -42,15 +44,16 @@ def exp_translation(
       with ω × (v × ω) = θ² v⊥ reduces to F0 v + F1 (ω × v) + F2 (ω·v) ω — no 0/0 left and
       no cancellation at large angles (F0 = sin θ/θ is computed directly).
 
-    ``theta_sq``: θ² as a compensated (hi, lo) pair (``_scalar.sq_norm_compensated``),
-    which keeps F0 and F1 accurate far beyond π.
+    F0 = c k, F1 = k²/2 and F2 come from ``half`` = (cos(θ/2), sin(θ/2)/(θ/2))
+    (``exp_half_angle``), so exp costs one sincos in all.
     """
-    x, x_lo = _scalar.sq_norm_compensated(w) if theta_sq is None else theta_sq
+    c, k = exp_half_angle(w) if half is None else half
+    x = sq_norm(w)
+    f0 = c * k
     wxv = cross(w, v)
-    half = _scalar.sinc(0.25 * x, 0.25 * x_lo)
-    f1, f2 = (0.5 * half * half)[..., None], _scalar.F2(x)[..., None]
+    f1, f2 = (0.5 * k * k)[..., None], _scalar.F2(x, f0)[..., None]
     if form == "seed000":
-        return _scalar.sinc(x, x_lo)[..., None] * v + f1 * wxv + f2 * _dot(w, v) * w
+        return f0[..., None] * v + f1 * wxv + f2 * _dot(w, v) * w
     return v + f1 * wxv + f2 * cross(w, wxv)
 
 
@@ -103,9 +106,9 @@ class SE3(SEBase[SO3]):
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
         xi = cls._check_tangent(tangent)
         v, w = xi[..., :3], xi[..., 3:]
-        theta_sq = _scalar.sq_norm_compensated(w)
-        t = exp_translation(v, w, _KERNEL_FORM, theta_sq)
-        return SE3(jnp.concatenate([exp_quaternion(w, theta_sq), t], axis=-1))
+        half = exp_half_angle(w)
+        t = exp_translation(v, w, _KERNEL_FORM, half)
+        return SE3(jnp.concatenate([exp_quaternion(w, half), t], axis=-1))
 
     @override
     def log(self) -> jax.Array:

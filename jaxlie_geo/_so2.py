@@ -141,7 +141,7 @@ class SO2(SOBase):
     @override
     def normalize(self) -> SO2:
         p = self.unit_complex
-        return SO2(p / jnp.linalg.norm(p, axis=-1, keepdims=True))
+        return SO2(p / jnp.sqrt(p[..., :1] ** 2 + p[..., 1:] ** 2))
 
     @override
     def _rplus_jacobian(self) -> jax.Array:

@@ -30,22 +30,33 @@ def skew(w: jax.Array) -> jax.Array:
     )
 
 
+def dot(a: jax.Array, b: jax.Array) -> jax.Array:
+    """Dot product over the last axis, written out (a reduce would split XLA's fusion)."""
+    out = a[..., 0] * b[..., 0]
+    for i in range(1, a.shape[-1]):
+        out = out + a[..., i] * b[..., i]
+    return out
+
+
 def sq_norm(w: jax.Array) -> jax.Array:
-    return jnp.sum(w * w, axis=-1)
+    return dot(w, w)
 
 
 def exp_quaternion(
-    omega: jax.Array, theta_sq: Optional[Tuple[jax.Array, jax.Array]] = None
+    omega: jax.Array, half: Optional[Tuple[jax.Array, jax.Array]] = None
 ) -> jax.Array:
-    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖, from kernels of θ²/4.
+    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖.
 
-    θ² is formed compensated (hi + lo; pass ``theta_sq`` to reuse one) so that angles far
-    beyond π keep full accuracy (with a plain θ², 5 ulp at θ ≈ 16; see _scalar)."""
-    hi, lo = _scalar.sq_norm_compensated(omega) if theta_sq is None else theta_sq
-    x4, x4_lo = 0.25 * hi, 0.25 * lo
-    w = _scalar.cos_(x4, x4_lo)
-    xyz = (0.5 * _scalar.sinc(x4, x4_lo))[..., None] * omega
-    return jnp.concatenate([w[..., None], xyz], axis=-1)
+    ``half`` = (cos(θ/2), sin(θ/2)/(θ/2)) from ``exp_half_angle`` (pass it to share one
+    sincos with the SE(3) translation)."""
+    c, k = exp_half_angle(omega) if half is None else half
+    return jnp.concatenate([c[..., None], (0.5 * k)[..., None] * omega], axis=-1)
+
+
+def exp_half_angle(omega: jax.Array) -> Tuple[jax.Array, jax.Array]:
+    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖, with θ² summed compensated (hi + lo) so that
+    angles far beyond π keep full accuracy (with a plain θ², 5 ulp at θ ≈ 16)."""
+    return _scalar.half_angle(*_scalar.sq_norm_compensated(omega))
 
 
 def log_quaternion(wxyz: jax.Array) -> jax.Array:
@@ -338,7 +349,7 @@ class SO3(SOBase):
     @override
     def normalize(self) -> SO3:
         q = self.wxyz
-        return SO3(q / jnp.linalg.norm(q, axis=-1, keepdims=True))
+        return SO3(q / jnp.sqrt(sq_norm(q))[..., None])
 
     @override
     def _rplus_jacobian(self) -> jax.Array:
