@@ -135,8 +135,8 @@ class SO2(SOBase):
 
     @override
     def inverse(self) -> SO2:
-        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
-        return SO2(jnp.stack([c, -s], axis=-1))
+        p = self.unit_complex
+        return SO2(p * jnp.array([1.0, -1.0], p.dtype))
 
     @override
     def normalize(self) -> SO2:

@@ -344,7 +344,7 @@ class SO3(SOBase):
     @override
     def inverse(self) -> SO3:
         q = self.wxyz
-        return SO3(jnp.concatenate([q[..., :1], -q[..., 1:]], axis=-1))
+        return SO3(q * jnp.array([1.0, -1.0, -1.0, -1.0], q.dtype))
 
     @override
     def normalize(self) -> SO3:
