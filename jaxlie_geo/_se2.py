@@ -47,12 +47,13 @@ class SE2(SEBase[SO2]):
     @override
     def exp(cls, tangent: hints.Array) -> SE2:
         """R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
-        B = (1 − cos θ)/θ = θ F1 (seed 001 §8.1; seed 000 §5 derives the same arc)."""
+        B = (1 − cos θ)/θ = θ F1 (seed 001 §8.1; seed 000 §5 derives the same arc),
+        from the half angle: A = c k, B = θ k²/2 with c = cos(θ/2), k = sinc(θ/2)."""
         xi = cls._check_tangent(tangent)
         vx, vy, theta = xi[..., 0], xi[..., 1], xi[..., 2]
-        x = theta * theta
-        A = _scalar.sinc(x)
-        B = theta * _scalar.F1(x)
+        c, k = _scalar.half_angle_of(theta)
+        A = c * k
+        B = 0.5 * theta * k * k
         return SE2(
             jnp.stack(
                 [jnp.cos(theta), jnp.sin(theta), A * vx - B * vy, B * vx + A * vy], axis=-1
