@@ -178,6 +178,14 @@ def _two_square(a: jax.Array) -> Tuple[jax.Array, jax.Array]:
     return p, ((hi * hi - p) + 2.0 * (hi * lo)) + lo * lo
 
 
+def _two_prod(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
+    """a·b = p + e exactly (Dekker)."""
+    p = a * b
+    ah, al = _split(a)
+    bh, bl = _split(b)
+    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
 def _two_sum(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
     """a + b = s + e exactly."""
     s = a + b
@@ -197,6 +205,26 @@ def sq_norm_compensated(w: jax.Array) -> Tuple[jax.Array, jax.Array]:
         p, f = _two_sum(p, q)
         err = err + (e + f)
     return _two_sum(p, err)
+
+
+@jax.custom_jvp
+def dot_compensated(a: jax.Array, b: jax.Array) -> jax.Array:
+    """a·b over the last axis as if computed in twice the working precision, then rounded
+    (Dot2 of Ogita, Rump & Oishi 2005). Needed where the dot cancels and the result is
+    multiplied into a much shorter vector: the SE(3) exp near θ = 2πk with v ⟂ ω (190 ulp
+    with a plain dot). Differentiated as the plain dot."""
+    p, err = _two_prod(a[..., 0], b[..., 0])
+    for i in range(1, a.shape[-1]):
+        q, e = _two_prod(a[..., i], b[..., i])
+        p, f = _two_sum(p, q)
+        err = err + (e + f)
+    return p + err
+
+
+@dot_compensated.defjvp
+def _dot_compensated_jvp(primals, tangents):  # type: ignore[no-untyped-def]
+    (a, b), (da, db) = primals, tangents
+    return dot_compensated(a, b), jnp.sum(da * b + a * db, axis=-1)
 
 
 @sq_norm_compensated.defjvp

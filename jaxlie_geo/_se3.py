@@ -19,7 +19,7 @@ from ._so3 import (
     exp_quaternion,
     jac_right_inv_so3,
     jac_right_so3,
-    log_quaternion_and_h,
+    log_quaternion_parts,
     skew,
     skew_sq,
     sq_norm,
@@ -53,28 +53,35 @@ def exp_translation(
     wxv = cross(w, v)
     f1, f2 = (0.5 * k * k)[..., None], _scalar.F2(x, f0)[..., None]
     if form == "seed000":
-        return f0[..., None] * v + f1 * wxv + f2 * _dot(w, v) * w
+        wv = _scalar.dot_compensated(w, v)[..., None]  # cancels for v ⟂ ω; see the kernel
+        return f0[..., None] * v + f1 * wxv + f2 * wv * w
     return v + f1 * wxv + f2 * cross(w, wxv)
 
 
 def log_translation(
-    t: jax.Array, w: jax.Array, h: jax.Array, form: str = "seed000"
+    t: jax.Array, u: jax.Array, s: jax.Array, h: jax.Array, form: str = "seed000"
 ) -> jax.Array:
-    """v = V(ω)⁻¹ t for the principal log (θ ≤ π), h = (θ/2)cot(θ/2) given (from the
-    quaternion, see ``log_quaternion_and_h``), in two algebraically equal forms:
+    """v = V(ω)⁻¹ t for the principal log (θ ≤ π), with ω = s·u and h = (θ/2)cot(θ/2) from
+    ``log_quaternion_parts``, in two algebraically equal forms:
 
     * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot eq. 7.85, G from _scalar); the
       last term cancels t⊥ near π, where h → 0 (5 ulp measured at π − 1e-3, |t| = 1e3);
     * ``"seed000"``: (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (seed 000 §9), evaluated as
-      h t − ½ ω × t + G (ω·t) ω (= h t⊥ + t∥ − ½ ω × t: two non-negative multiples of t∥,
-      no cancellation).
+      h t − ½ s (u × t) + G s² (u·t) u (= h t⊥ + t∥ − ½ ω × t: two non-negative multiples of
+      t∥, no cancellation; u is stored, so ω's rounding is not multiplied by |t|).
     """
+    w = s[..., None] * u
     x = sq_norm(w)
-    g = _scalar.G_principal(x)[..., None]
-    wxt = cross(w, t)
+    g = _scalar.G_principal(x)
     if form == "seed000":
-        return h[..., None] * t - 0.5 * wxt + g * _dot(w, t) * w
-    return t - 0.5 * wxt + g * cross(w, wxt)
+        # G s² = (1 − h)/‖u‖² exactly; where h < ½ (θ > 2.3) that form has no cancellation
+        # and does not carry s's rounding twice (5 → 3 ulp in v near π, |t| = 1e3).
+        far = h < 0.5
+        n2 = jnp.where(far, sq_norm(u), 1.0)
+        coef = jnp.where(far, (1.0 - h) / n2, g * s * s)
+        return h[..., None] * t - (0.5 * s)[..., None] * cross(u, t) + (coef * dot(u, t))[..., None] * u
+    wxt = cross(w, t)
+    return t - 0.5 * wxt + g[..., None] * cross(w, wxt)
 
 
 _KERNEL_FORM = "seed000"  # more accurate (see the docstrings); speed in benchmarks/RESULTS.md
@@ -115,8 +122,9 @@ class SE3(SEBase[SO3]):
         """ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
         G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
         p = self.wxyz_xyz
-        w, h = log_quaternion_and_h(p[..., :4])
-        return jnp.concatenate([log_translation(p[..., 4:], w, h, _KERNEL_FORM), w], axis=-1)
+        u, s, h = log_quaternion_parts(p[..., :4])
+        v = log_translation(p[..., 4:], u, s, h, _KERNEL_FORM)
+        return jnp.concatenate([v, s[..., None] * u], axis=-1)
 
     @classmethod
     @override

@@ -64,19 +64,22 @@ def log_quaternion(wxyz: jax.Array) -> jax.Array:
     after the sign choice w ≥ 0, so the angle is in [0, π]. The quaternion atan2 form is
     accurate up to and at π (no acos, no snapping); at w = 0 exactly (angle π) the stored
     vector part gives the axis."""
-    return log_quaternion_and_h(wxyz)[0]
+    u, s, _ = log_quaternion_parts(wxyz)
+    return s[..., None] * u
 
 
-def log_quaternion_and_h(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """``log_quaternion`` and h = (θ/2)cot(θ/2), read off the same quaternion as
-    h = |w| · atan2(n, |w|)/n (= cos(θ/2) · (θ/2)/sin(θ/2) for a unit quaternion): no
-    cancellation anywhere on [0, π], unlike 1 − θ² G, which cancels as h → 0 near π."""
+def log_quaternion_parts(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Array]:
+    """(u, s, h) with ω = log(q) = s·u: u the stored vector part (sign-flipped so that
+    w ≥ 0, exact), s = θ/‖u‖ = 2 atan2(‖u‖, |w|)/‖u‖, and h = (θ/2)cot(θ/2) read off the same
+    quaternion as |w| · atan2(‖u‖, |w|)/‖u‖ / ‖q‖ — no cancellation anywhere on [0, π],
+    unlike 1 − θ² G, which cancels as h → 0 near π. Formulas built on (u, s) rather than the
+    rounded ω avoid propagating ω's rounding through products with long translations."""
     w = wxyz[..., 0]
-    v = wxyz[..., 1:]
     sign = jnp.where(w < 0, -1.0, 1.0).astype(wxyz.dtype)
-    ratio = _scalar.atan2_over(sq_norm(v), sign * w)
+    u = sign[..., None] * wxyz[..., 1:]
+    ratio = _scalar.atan2_over(sq_norm(u), sign * w)
     h = sign * w * ratio / jnp.sqrt(sq_norm(wxyz))  # the norm: h is scale-invariant
-    return (2.0 * sign * ratio)[..., None] * v, h
+    return u, 2.0 * ratio, h
 
 
 def quaternion_product(p: jax.Array, q: jax.Array) -> jax.Array:

@@ -354,6 +354,13 @@ def _angles(regime, dtype, n, rng) -> np.ndarray:
         return np.zeros(n)
     u = np.concatenate([[0.0, 1.0], rng.random(max(n - 2, 0))])[:n]
     a = np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))
+    if regime == "beyond_pi":
+        # A quarter of the draws sit within 1e-3 of 2πk, k = 1..4, where sin(θ/2) → 0 makes
+        # the SE(3) translation much shorter than v and cancellations show (random draws
+        # rarely land there).
+        m = n // 4
+        k = rng.integers(1, 5, m)
+        a[2 : 2 + m] = 2 * math.pi * k + rng.uniform(-1e-3, 1e-3, m)
     return math.pi - a if regime == "near_pi" else a
 
 
