@@ -1,0 +1,57 @@
+"""Smoke test for the examples: run them in --quick mode as a user would."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+HAVE_JAXLIE = importlib.util.find_spec("jaxlie") is not None
+
+
+def _float(pattern: str, text: str) -> float:
+    match = re.search(pattern, text)
+    assert match, f"pattern {pattern!r} not found in output:\n{text}"
+    return float(match.group(1))
+
+
+def test_pose_interpolation_quick(tmp_path: Path) -> None:
+    png = tmp_path / "pictures" / "pose_interpolation.png"  # parent does not exist yet
+    proc = subprocess.run(
+        [sys.executable, "examples/pose_interpolation.py", "--quick", "--out", str(png)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    out = proc.stdout
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
+
+    # The expected report lines.
+    assert re.search(r"Interpolating 10,000 SE3 pose pairs \(float32\)", out), out
+    assert _float(r"compile \(first call, incl\. tracing\)\s+([\d.]+) (?:s|ms)\b", out) > 0
+    assert re.search(r"jaxlie_geo, one jit call\s+[\d.]+ [nµm]?s/pose .*median of 3 runs", out), out
+    assert re.search(r"Python loop, NumPy per pose\s+[\d.]+ [nµm]?s/pose -> jaxlie_geo is [\d,]+x faster", out), out
+    assert re.search(r"Python loop, jaxlie_geo call per pose\s+.*x faster", out), out
+    assert "extrapolated to 10,000" in out, out
+
+    # Our float32 result agrees with an independent float64 NumPy implementation.
+    assert _float(r"max \|ours - float64 NumPy\| over the \d+ looped pairs: (\S+)", out) < 1e-5
+
+    if HAVE_JAXLIE:
+        assert re.search(r"jaxlie 1\.5, same expression, jit\s+[\d.]+ [nµm]?s/pose -> jaxlie_geo is [\d.]+x faster", out), out
+        # Same computation as jaxlie: the 4x4 matrices agree to float32 accuracy ...
+        assert _float(r"max \|ours - jaxlie\| over 10,000 poses, as 4x4 matrices: (\S+)", out) < 1e-4
+        # ... and where they differ most, ours is the one close to the float64 reference.
+        assert _float(r"worst pair #[\d,]+ vs a float64 NumPy reference: ours (\S+),", out) < 1e-5
+    else:
+        assert "jaxlie not installed" in out, out
+
+    # A real, non-trivial PNG.
+    assert png.is_file(), out
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(data) > 20_000
