@@ -42,18 +42,21 @@ def _default_float() -> jnp.dtype:
     return jnp.zeros(()).dtype
 
 
-def as_float_array(x: Any, name: str, trailing: Tuple[int, ...], where: str) -> jax.Array:
+def as_float_array(
+    x: Any, name: str, trailing: Tuple[int, ...], where: str, like: Any = None
+) -> jax.Array:
     """Convert ``x`` to a floating JAX array and check its trailing shape.
 
-    Integer and boolean inputs are promoted to the default float dtype; floating inputs
-    keep their dtype. Raises ``ValueError`` naming ``where``, ``name``, the expected
-    trailing shape and the received shape.
+    Integer and boolean inputs are promoted to ``like``'s dtype when given (the element
+    they are combined with: int ⊕ float32 → float32, as JAX promotes), else to the default
+    float dtype; floating inputs keep their dtype. Raises ``ValueError`` naming ``where``,
+    ``name``, the expected trailing shape and the received shape.
     """
     x = jnp.asarray(x)
     if not jnp.issubdtype(x.dtype, jnp.floating):
         if jnp.issubdtype(x.dtype, jnp.complexfloating):
             raise ValueError(f"{where}: `{name}` must be real, got dtype {x.dtype}.")
-        x = x.astype(_default_float())
+        x = x.astype(_default_float() if like is None else jnp.asarray(like).dtype)
     k = len(trailing)
     if x.ndim < k or tuple(x.shape[x.ndim - k :]) != tuple(trailing):
         expected = "(*batch, " + ", ".join(map(str, trailing)) + ")" if k else "(*batch,)"
@@ -370,10 +373,13 @@ class MatrixLieGroup(abc.ABC):
         return as_float_array(matrix, "matrix", (n, n), f"{cls.__name__}.{where}")
 
     def _check_points(self, target: hints.Array) -> jax.Array:
-        target = as_float_array(
-            target, "target", (self.space_dim,), f"{type(self).__name__}.apply"
+        return as_float_array(
+            target,
+            "target",
+            (self.space_dim,),
+            f"{type(self).__name__}.apply",
+            like=self.parameters(),
         )
-        return target
 
     @abc.abstractmethod
     def _rplus_jacobian(self) -> jax.Array:
@@ -417,6 +423,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
             "translation",
             (cls.space_dim,),
             f"{cls.__name__}.from_rotation_and_translation",
+            like=rotation.parameters(),
         )
         r = rotation.parameters()
         dtype = jnp.result_type(r, t)

@@ -33,7 +33,7 @@ class Geodesic(Generic[GroupT]):
         """Element at time(s) ``t``; ``t`` broadcasts numpy-style against the batch axes
         (shape ``broadcast(B, t.shape)``)."""
         G = type(self.start)
-        t = as_float_array(t, "t", (), f"{G.__name__} geodesic")
+        t = as_float_array(t, "t", (), f"{G.__name__} geodesic", like=self.tangent)
         t = t.astype(jnp.result_type(t, self.tangent))
         return self.start.multiply(G.exp(t[..., None] * self.tangent))
 

@@ -89,7 +89,7 @@ class SO2(SOBase):
     @override
     def vee(cls, matrix: hints.Array) -> jax.Array:
         m = as_float_array(matrix, "matrix", (2, 2), "SO2.vee")
-        return m[..., 1, 0:1]
+        return 0.5 * (m[..., 1, 0:1] - m[..., 0, 1:2])
 
     @override
     def adjoint(self) -> jax.Array:
