@@ -81,7 +81,9 @@ def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``a @ exp(δ)`` w.r.t. ``a`` and ``δ``: ``(Ad(exp(−δ)), J_r(δ))``."""
     G = type(a)
     delta = G._check_tangent(delta, "rplus")
-    return _broadcast(G.exp(-delta).adjoint(), G.jac_right(delta))
+    J_a, J_d = _broadcast(G.exp(-delta).adjoint(), G.jac_right(delta))
+    J_a, _ = _broadcast(J_a, _eye_like(a))  # the element's batch axes broadcast too
+    return _broadcast(J_a, J_d)
 
 
 def exp(G: type, tangent: hints.Array) -> jax.Array:
