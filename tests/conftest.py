@@ -1,0 +1,385 @@
+"""Shared test configuration and the group-test harness.
+
+* ``jax_enable_x64`` is switched on at import, before any test module runs, so float64 is
+  available everywhere; float32 tests build float32 arrays explicitly (and so also check
+  that nothing is silently promoted to float64).
+* Hypothesis profiles: ``dev`` (default, more examples) and ``ci`` (fewer, derandomised,
+  no deadline); ``HYPOTHESIS_PROFILE`` picks one (``.ci/run`` sets ``ci``).
+* The harness: ``GROUPS`` lists every group once; ``over_cases`` parametrises a test over
+  group × batch shape × dtype, ``over_groups_dtypes`` over group × dtype and
+  ``over_groups`` over the groups alone. A group added to ``GROUPS`` (with its generators in
+  ``GENERATORS`` and its tangent layout in ``LAYOUT``) gets every property test.
+* Tolerances live in ``TOL`` (one entry per dtype); tests scale them by an explicit factor
+  where an operation is known to amplify rounding.
+* Independent references: the Lie-algebra generators of each group are written out here
+  from the documented tangent orderings, not taken from the library, so ``hat``, ``vee``
+  and ``exp`` are checked against ``Σ xᵢ Eᵢ`` and ``scipy.linalg.expm``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Callable, Dict, Sequence, Tuple
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import HealthCheck, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+import jaxlie_geo  # noqa: E402
+from jaxlie_geo import SE2, SE3, SO2, SO3  # noqa: E402
+
+# ---------------------------------------------------------------------------------
+# Hypothesis profiles.
+
+settings.register_profile(
+    "ci",
+    max_examples=3,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile(
+    "dev",
+    max_examples=8,
+    deadline=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+# ---------------------------------------------------------------------------------
+# The harness: every group, batch shape and dtype.
+
+GROUPS = [SO2, SE2, SO3, SE3]
+BATCHES: Sequence[Tuple[int, ...]] = [(), (3,), (2, 4)]
+DTYPES = [jnp.float32, jnp.float64]
+
+
+def _dtype_name(dtype: Any) -> str:
+    return jnp.dtype(dtype).name
+
+
+def _batch_name(batch: Tuple[int, ...]) -> str:
+    return "b" + ("x".join(map(str, batch)) if batch else "0")
+
+
+CASES = [
+    pytest.param(G, b, d, id=f"{G.__name__}-{_batch_name(b)}-{_dtype_name(d)}")
+    for G in GROUPS
+    for b in BATCHES
+    for d in DTYPES
+]
+GROUP_DTYPES = [
+    pytest.param(G, d, id=f"{G.__name__}-{_dtype_name(d)}") for G in GROUPS for d in DTYPES
+]
+
+over_cases = pytest.mark.parametrize(("G", "batch", "dtype"), CASES)
+"""Parametrise over group × batch shape × dtype (arguments ``G, batch, dtype``)."""
+over_groups_dtypes = pytest.mark.parametrize(("G", "dtype"), GROUP_DTYPES)
+"""Parametrise over group × dtype (arguments ``G, dtype``)."""
+over_groups = pytest.mark.parametrize("G", GROUPS, ids=lambda G: G.__name__)
+"""Parametrise over the groups (argument ``G``)."""
+over_dtypes = pytest.mark.parametrize("dtype", DTYPES, ids=_dtype_name)
+"""Parametrise over the dtypes (argument ``dtype``)."""
+
+# ---------------------------------------------------------------------------------
+# Tolerances: one place, per dtype. rtol and atol are applied together
+# (|got − want| ≤ atol + rtol·|want|, numpy's rule) after scaling by a test's factor.
+
+TOL: Dict[Any, Dict[str, float]] = {
+    jnp.dtype(jnp.float32): {"rtol": 1e-5, "atol": 1e-5},
+    jnp.dtype(jnp.float64): {"rtol": 1e-12, "atol": 1e-12},
+}
+EPS: Dict[Any, float] = {
+    jnp.dtype(jnp.float32): float(jnp.finfo(jnp.float32).eps),
+    jnp.dtype(jnp.float64): float(jnp.finfo(jnp.float64).eps),
+}
+# Comparisons with jaxlie: jaxlie's own kernels are less accurate (Taylor switches at
+# 1e-5 / 1e-10 on θ², arccos-based logs), so the side-by-side checks allow more.
+COMPAT_TOL: Dict[Any, Dict[str, float]] = {
+    jnp.dtype(jnp.float32): {"rtol": 1e-4, "atol": 1e-4},
+    jnp.dtype(jnp.float64): {"rtol": 1e-9, "atol": 1e-9},
+}
+
+
+def tol(dtype: Any, factor: float = 1.0) -> Dict[str, float]:
+    """``rtol``/``atol`` for ``dtype``, scaled by ``factor``."""
+    t = TOL[jnp.dtype(dtype)]
+    return {"rtol": t["rtol"] * factor, "atol": t["atol"] * factor}
+
+
+def to_np(x: Any) -> np.ndarray:
+    """A float64 numpy copy (references are computed in float64 numpy)."""
+    return np.asarray(x, dtype=np.float64)
+
+
+def assert_close(got: Any, want: Any, dtype: Any, factor: float = 1.0, msg: str = "") -> None:
+    """Elementwise closeness at ``dtype``'s tolerance (scaled by ``factor``)."""
+    got, want = to_np(got), to_np(want)
+    assert got.shape == want.shape, f"shape {got.shape} != {want.shape} {msg}"
+    np.testing.assert_allclose(got, want, err_msg=msg, **tol(dtype, factor))
+
+
+def assert_close_compat(got: Any, want: Any, dtype: Any, msg: str = "") -> None:
+    """Closeness at the jaxlie side-by-side tolerance."""
+    got, want = to_np(got), to_np(want)
+    assert got.shape == want.shape, f"shape {got.shape} != {want.shape} {msg}"
+    np.testing.assert_allclose(got, want, err_msg=msg, **COMPAT_TOL[jnp.dtype(dtype)])
+
+
+def assert_rel_norm(got: Any, want: Any, dtype: Any, ulps: float, axes: int = 1) -> None:
+    """Norm-wise relative error over the last ``axes`` axes:
+    ``‖got − want‖ ≤ ulps · eps · ‖want‖`` with no absolute floor, so errors in tiny
+    values (small angles) are not hidden."""
+    got, want = to_np(got), to_np(want)
+    assert got.shape == want.shape, f"shape {got.shape} != {want.shape}"
+    ax = tuple(range(-axes, 0))
+    err = np.sqrt(np.sum((got - want) ** 2, axis=ax))
+    scale = np.sqrt(np.sum(want**2, axis=ax))
+    bound = ulps * EPS[jnp.dtype(dtype)] * scale
+    bad = ~(err <= bound)
+    assert not np.any(bad), (
+        f"relative error too large: err={err[bad]}, bound={bound[bad]},\n"
+        f"got={got[bad] if got.ndim > axes else got}\nwant={want[bad] if want.ndim > axes else want}"
+    )
+
+
+def param_dtypes(tree: Any) -> set:
+    """The set of dtypes of every array leaf of ``tree`` (groups included)."""
+    return {jnp.asarray(x).dtype for x in jax.tree.leaves(tree)}
+
+
+# ---------------------------------------------------------------------------------
+# Independent references: generators and tangent layouts, from the documented orderings
+# (SO2 (θ,), SE2 (vx, vy, θ), SO3 (ωx, ωy, ωz), SE3 (vx, vy, vz, ωx, ωy, ωz)).
+
+
+def _unit(n: int, i: int, j: int) -> np.ndarray:
+    m = np.zeros((n, n))
+    m[i, j] = 1.0
+    return m
+
+
+def _so3_generators() -> np.ndarray:
+    ex = _unit(3, 2, 1) - _unit(3, 1, 2)
+    ey = _unit(3, 0, 2) - _unit(3, 2, 0)
+    ez = _unit(3, 1, 0) - _unit(3, 0, 1)
+    return np.stack([ex, ey, ez])
+
+
+def _embed(block: np.ndarray, n: int) -> np.ndarray:
+    out = np.zeros((n, n))
+    out[: block.shape[0], : block.shape[1]] = block
+    return out
+
+
+GENERATORS: Dict[type, np.ndarray] = {
+    SO2: np.stack([_unit(2, 1, 0) - _unit(2, 0, 1)]),
+    SE2: np.stack([_unit(3, 0, 2), _unit(3, 1, 2), _embed(_unit(2, 1, 0) - _unit(2, 0, 1), 3)]),
+    SO3: _so3_generators(),
+    SE3: np.stack(
+        [_unit(4, 0, 3), _unit(4, 1, 3), _unit(4, 2, 3)]
+        + [_embed(e, 4) for e in _so3_generators()]
+    ),
+}
+"""``GENERATORS[G][k]`` is the Lie-algebra matrix of the k-th tangent coordinate."""
+
+# (rotation slice, translation slice) of each group's tangent; ``None`` where absent.
+LAYOUT: Dict[type, Tuple[slice, Any]] = {
+    SO2: (slice(0, 1), None),
+    SE2: (slice(2, 3), slice(0, 2)),
+    SO3: (slice(0, 3), None),
+    SE3: (slice(3, 6), slice(0, 3)),
+}
+
+
+def is_se(G: type) -> bool:
+    return LAYOUT[G][1] is not None
+
+
+def hat_ref(G: type, x: Any) -> np.ndarray:
+    """``Σ xₖ Eₖ`` in float64 numpy."""
+    return np.einsum("...k,kij->...ij", to_np(x), GENERATORS[G])
+
+
+def vee_ref(G: type, m: Any) -> np.ndarray:
+    """Coefficients of ``m`` on the generators (Frobenius projection; the generators are
+    orthogonal, so this reads the antisymmetric rotation part and the translation column)."""
+    E = GENERATORS[G]
+    return np.einsum("...ij,kij->...k", to_np(m), E) / np.einsum("kij,kij->k", E, E)
+
+
+def expm_ref(G: type, x: Any) -> np.ndarray:
+    """``scipy.linalg.expm(Σ xₖ Eₖ)``, batched, float64."""
+    import scipy.linalg
+
+    X = hat_ref(G, x)
+    flat = X.reshape(-1, *X.shape[-2:])
+    return np.stack([scipy.linalg.expm(m) for m in flat]).reshape(X.shape)
+
+
+def logm_ref(m: Any) -> np.ndarray:
+    """Principal ``scipy.linalg.logm``, batched, real part, float64."""
+    import scipy.linalg
+
+    m = to_np(m)
+    flat = m.reshape(-1, *m.shape[-2:])
+    return np.stack([np.real(scipy.linalg.logm(a)) for a in flat]).reshape(m.shape)
+
+
+def rotation_angle(G: type, tangent: Any) -> np.ndarray:
+    """|rotation angle| of a tangent, shape ``batch``."""
+    return np.linalg.norm(to_np(tangent)[..., LAYOUT[G][0]], axis=-1)
+
+
+def homogeneous_apply(G: type, M: Any, p: Any) -> np.ndarray:
+    """Action of a group matrix on points, in numpy: ``M p`` (SO) or ``(M [p; 1])[:n]`` (SE)."""
+    M, p = to_np(M), to_np(p)
+    if is_se(G):
+        n = p.shape[-1]
+        ph = np.concatenate([p, np.ones((*p.shape[:-1], 1))], axis=-1)
+        return np.einsum("...ij,...j->...i", M, ph)[..., :n]
+    return np.einsum("...ij,...j->...i", M, p)
+
+
+# ---------------------------------------------------------------------------------
+# Random inputs.
+
+seeds = st.integers(min_value=0, max_value=2**31 - 1)
+"""Hypothesis strategy for seeds; tangents and points come from numpy's generator with
+that seed (no JAX compilation per shape), elements from ``G.sample_uniform``."""
+
+ANGLE_KINDS = ("generic", "zero", "tiny", "small", "large", "mixed")
+angle_kinds = st.sampled_from(ANGLE_KINDS)
+"""Hypothesis strategy for the regime of tangent rotation angles."""
+
+
+def key_of(seed: int) -> jax.Array:
+    return jax.random.PRNGKey(seed)
+
+
+def _angles(rng: np.random.Generator, batch: Tuple[int, ...], kind: str, max_angle: float) -> np.ndarray:
+    u = rng.uniform(size=batch)
+    if kind == "generic":
+        return u * max_angle
+    if kind == "zero":
+        return np.zeros(batch)
+    if kind == "tiny":
+        return 1e-12 * (0.5 + u)
+    if kind == "small":
+        return 10.0 ** (-8.0 + 7.0 * u)  # 1e-8 .. 1e-1, log-uniform
+    if kind == "large":
+        return max_angle - 0.1 * u
+    if kind == "mixed":  # a bit of everything inside one batch
+        pool = np.array([0.0, 1e-12, 1e-6, 0.5, 2.0, max_angle])
+        return pool[rng.integers(0, len(pool), size=batch)]
+    raise ValueError(kind)
+
+
+def random_tangent(
+    G: type,
+    seed: int,
+    batch: Tuple[int, ...],
+    dtype: Any,
+    kind: str = "generic",
+    max_angle: float = 3.0,
+    trans_scale: float = 1.0,
+) -> np.ndarray:
+    """Random tangent of ``G`` (a numpy array of ``dtype``) with rotation angle set by
+    ``kind`` (at most ``max_angle``; "generic" is uniform in [0, max_angle]) and a normal
+    translation of scale ``trans_scale``; built in float64 and rounded to ``dtype``."""
+    rng = np.random.default_rng(seed)
+    rot, trans = LAYOUT[G]
+    rot_dim = rot.stop - rot.start
+    direction = rng.normal(size=(*batch, rot_dim))
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    angle = _angles(rng, batch, kind, max_angle)
+    out = np.zeros((*batch, G.tangent_dim))
+    out[..., rot] = direction * angle[..., None]
+    if trans is not None:
+        out[..., trans] = trans_scale * rng.normal(size=(*batch, trans.stop - trans.start))
+    return out.astype(dtype)
+
+
+def random_element(G: type, seed: int, batch: Tuple[int, ...], dtype: Any) -> Any:
+    """Haar-uniform rotation (translation uniform in [-1, 1]) via ``G.sample_uniform``."""
+    return G.sample_uniform(key_of(seed), batch, dtype=dtype)
+
+
+def random_points(G: type, seed: int, batch: Tuple[int, ...], dtype: Any) -> np.ndarray:
+    """Standard normal points, a numpy array of ``dtype``."""
+    rng = np.random.default_rng(seed + 7919)
+    return rng.normal(size=(*batch, G.space_dim)).astype(dtype)
+
+
+def special_tangents(G: type, dtype: Any) -> jax.Array:
+    """A batch of delicate tangents: zero, 1e-12 rotations, pure translations, an exact
+    (float) π rotation, π − 1e-6, and a long translation with a generic angle."""
+    rot, trans = LAYOUT[G]
+    rot_dim = rot.stop - rot.start
+    axis = np.ones(rot_dim) / np.sqrt(rot_dim)
+    angles = [0.0, 1e-12, 0.0, np.pi, np.pi - 1e-6, 1.0, 1e-12]
+    tscales = [0.0, 0.0, 1.0, 0.0, 1.0, 10.0, 3.0]
+    out = np.zeros((len(angles), G.tangent_dim))
+    for i, (a, s) in enumerate(zip(angles, tscales)):
+        out[i, rot] = a * axis
+        if trans is not None:
+            out[i, trans] = s * np.linspace(1.0, -0.5, trans.stop - trans.start)
+    return out.astype(dtype)
+
+
+def make_group(G: type, params: Any) -> Any:
+    """An element from raw parameters (through the pytree constructor)."""
+    return G(jnp.asarray(params))
+
+
+def all_close_as_matrices(a: Any, b: Any, dtype: Any, factor: float = 1.0, msg: str = "") -> None:
+    assert_close(a.as_matrix(), b.as_matrix(), dtype, factor, msg)
+
+
+__all__ = [
+    "GROUPS",
+    "BATCHES",
+    "DTYPES",
+    "CASES",
+    "TOL",
+    "COMPAT_TOL",
+    "EPS",
+    "over_cases",
+    "over_groups_dtypes",
+    "over_groups",
+    "over_dtypes",
+    "tol",
+    "assert_close",
+    "assert_close_compat",
+    "assert_rel_norm",
+    "param_dtypes",
+    "GENERATORS",
+    "LAYOUT",
+    "is_se",
+    "hat_ref",
+    "vee_ref",
+    "expm_ref",
+    "logm_ref",
+    "rotation_angle",
+    "homogeneous_apply",
+    "seeds",
+    "angle_kinds",
+    "key_of",
+    "random_tangent",
+    "random_element",
+    "random_points",
+    "special_tangents",
+    "make_group",
+    "all_close_as_matrices",
+    "jaxlie_geo",
+    "Callable",
+]

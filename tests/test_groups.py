@@ -1,0 +1,671 @@
+"""The shared property harness: every property on every group × batch shape × dtype.
+
+References are independent of the library: group axioms, the matrix representation
+(numpy products and inverses), generators written out in conftest (``hat_ref``),
+``scipy.linalg.expm``/``logm`` and automatic differentiation of the library's own
+composition (jaxlie's definition of ``jlog``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import (
+    GROUPS,
+    LAYOUT,
+    all_close_as_matrices,
+    angle_kinds,
+    assert_close,
+    assert_rel_norm,
+    expm_ref,
+    hat_ref,
+    homogeneous_apply,
+    is_se,
+    key_of,
+    over_cases,
+    over_groups,
+    over_groups_dtypes,
+    param_dtypes,
+    random_element,
+    random_points,
+    random_tangent,
+    rotation_angle,
+    seeds,
+    special_tangents,
+    to_np,
+    vee_ref,
+)
+from hypothesis import given
+from hypothesis import strategies as st
+
+import jax
+import jax.numpy as jnp
+import jaxlie_geo
+from jaxlie_geo import SE2, SE3, SO2, SO3
+
+
+def _eye(G, batch):
+    return np.broadcast_to(np.eye(G.matrix_dim), (*batch, G.matrix_dim, G.matrix_dim))
+
+
+@jax.jit
+def _jlog_autodiff_flat(T):
+    G = type(T)
+    zero = jnp.zeros(G.tangent_dim, T.parameters().dtype)
+    return jax.jacrev(lambda d: (T @ G.exp(d)).log())(zero)
+
+
+def _jlog_by_autodiff(T):
+    """jaxlie's definition of jlog: d log(T @ exp(δ)) / dδ at δ = 0 (reverse mode, the
+    same δ for every batch element, so the Jacobian is per element). The batch is
+    flattened and padded to 8 so that one compilation per group and dtype serves every
+    batch shape (eager reverse mode would recompile on every call)."""
+    G = type(T)
+    batch = T.get_batch_axes()
+    p = np.asarray(T.parameters()).reshape(-1, G.parameters_dim)
+    n = p.shape[0]
+    assert n <= 8
+    padded = G(jnp.asarray(p[np.arange(8) % n]))
+    J = np.asarray(_jlog_autodiff_flat(padded))[:n]
+    return J.reshape(*batch, G.tangent_dim, G.tangent_dim)
+
+
+@jax.jit
+def _call_path(path, t):
+    return path(t)
+
+
+# ---------------------------------------------------------------------------------
+# Group axioms.
+
+
+@over_cases
+@given(seed=seeds)
+def test_identity_laws(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    I_batched = G.identity(batch, dtype=dtype)
+    I_single = G.identity(dtype=dtype)
+    assert I_batched.get_batch_axes() == batch
+    assert I_batched.parameters().dtype == dtype
+    np.testing.assert_array_equal(to_np(I_batched.as_matrix()), _eye(G, batch))
+    for I in (I_batched, I_single):
+        all_close_as_matrices(T @ I, T, dtype)
+        all_close_as_matrices(I @ T, T, dtype)
+    np.testing.assert_array_equal(to_np(I_batched.log()), np.zeros((*batch, G.tangent_dim)))
+    np.testing.assert_array_equal(
+        to_np(G.exp(jnp.zeros((*batch, G.tangent_dim), dtype)).as_matrix()), _eye(G, batch)
+    )
+    np.testing.assert_array_equal(to_np(I_batched.inverse().as_matrix()), _eye(G, batch))
+
+
+@over_cases
+@given(seed=seeds)
+def test_inverse_laws(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    eye = _eye(G, batch)
+    assert_close((T @ T.inverse()).as_matrix(), eye, dtype, 2)
+    assert_close((T.inverse() @ T).as_matrix(), eye, dtype, 2)
+    all_close_as_matrices(T.inverse().inverse(), T, dtype, 2)
+    assert T.inverse().get_batch_axes() == batch
+
+
+@over_cases
+@given(seed=seeds)
+def test_associativity(G, batch, dtype, seed):
+    T, U, V = (random_element(G, seed + i, batch, dtype) for i in range(3))
+    all_close_as_matrices((T @ U) @ V, T @ (U @ V), dtype, 4)
+
+
+# ---------------------------------------------------------------------------------
+# exp / log.
+
+
+@over_cases
+@given(seed=seeds, kind=angle_kinds)
+def test_log_of_exp_is_identity(G, batch, dtype, seed, kind):
+    """log(exp(x)) == x for |rotation angle| < π; the rotation part to a relative error
+    of a few ulp (no absolute floor: small angles must not lose digits)."""
+    x = random_tangent(G, seed, batch, dtype, kind)
+    y = G.exp(x).log()
+    assert y.dtype == dtype and y.shape == (*batch, G.tangent_dim)
+    assert_close(y, x, dtype, 4)
+    rot = LAYOUT[G][0]
+    assert_rel_norm(y[..., rot], x[..., rot], dtype, ulps=16)
+
+
+@over_cases
+@given(seed=seeds)
+def test_exp_of_log_is_identity(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    x = T.log()
+    assert x.dtype == dtype and x.shape == (*batch, G.tangent_dim)
+    all_close_as_matrices(G.exp(x), T, dtype, 4)
+    # Principal log: rotation angle in [0, π].
+    assert np.all(rotation_angle(G, x) <= np.pi * (1 + 4 * float(jnp.finfo(dtype).eps)))
+
+
+@over_groups_dtypes
+def test_exp_of_log_special_elements(G, dtype):
+    """exp(log(T)) == T at zero, 1e-12, pure translations, exactly π (as a float) and
+    π − 1e-6, and long translations."""
+    T = G.exp(special_tangents(G, dtype))
+    x = T.log()
+    assert np.all(np.isfinite(to_np(x)))
+    all_close_as_matrices(G.exp(x), T, dtype, 8)
+    assert np.all(rotation_angle(G, x) <= np.pi * (1 + 4 * float(jnp.finfo(dtype).eps)))
+
+
+@pytest.mark.parametrize("G", [SO3, SE3], ids=lambda G: G.__name__)
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=lambda d: jnp.dtype(d).name)
+@given(seed=seeds)
+def test_log_is_independent_of_quaternion_sign(G, dtype, seed):
+    """q and −q are the same rotation: the principal log must not depend on the sign."""
+    T = random_element(G, seed, (3,), dtype)
+    p = np.array(T.parameters())
+    p[..., :4] *= -1
+    flipped = G(jnp.asarray(p))
+    assert_close(flipped.log(), T.log(), dtype, 2)
+    all_close_as_matrices(flipped, T, dtype)
+
+
+@over_cases
+@given(seed=seeds)
+def test_exp_matches_scipy_expm(G, batch, dtype, seed):
+    """exp(x) == expm(Σ xₖ Eₖ) (scipy, float64, generators from the documented ordering),
+    and == expm(hat(x)) with the library's hat; also for angles up to 10."""
+    for x in (
+        random_tangent(G, seed, batch, dtype),
+        random_tangent(G, seed + 1, batch, dtype, max_angle=10.0),
+    ):
+        got = G.exp(x).as_matrix()
+        assert got.dtype == dtype
+        factor = 2 + float(np.max(rotation_angle(G, x), initial=0.0))
+        assert_close(got, expm_ref(G, x), dtype, factor)
+        hat = to_np(G.hat(x))
+        flat = hat.reshape(-1, G.matrix_dim, G.matrix_dim)
+        import scipy.linalg
+
+        via_hat = np.stack([scipy.linalg.expm(m) for m in flat]).reshape(hat.shape)
+        assert_close(got, via_hat, dtype, factor)
+
+
+# ---------------------------------------------------------------------------------
+# Matrices, hat and vee.
+
+
+@over_cases
+@given(seed=seeds)
+def test_matrix_round_trip(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    M = T.as_matrix()
+    assert M.dtype == dtype and M.shape == (*batch, G.matrix_dim, G.matrix_dim)
+    back = G.from_matrix(M)
+    assert back.parameters().dtype == dtype and back.get_batch_axes() == batch
+    assert_close(back.as_matrix(), M, dtype, 2)
+    # The matrix is a rigid motion: orthonormal rotation block, det +1, homogeneous row.
+    n = G.space_dim
+    R = to_np(M)[..., :n, :n]
+    assert_close(np.swapaxes(R, -1, -2) @ R, _eye(G, batch)[..., :n, :n], dtype, 2)
+    assert_close(np.linalg.det(R), np.ones(batch), dtype, 2)
+    if is_se(G):
+        bottom = np.zeros((*batch, n + 1))
+        bottom[..., n] = 1.0
+        np.testing.assert_array_equal(to_np(M)[..., n, :], bottom)
+
+
+@over_cases
+@given(seed=seeds)
+def test_from_matrix_of_independent_matrix(G, batch, dtype, seed):
+    """from_matrix of scipy's expm (rounded to dtype) reproduces it."""
+    x = random_tangent(G, seed, batch, dtype, max_angle=np.pi)
+    M = expm_ref(G, x).astype(dtype)
+    T = G.from_matrix(M)
+    assert T.parameters().dtype == dtype
+    assert_close(T.as_matrix(), M, dtype, 4)
+
+
+@over_cases
+@given(seed=seeds)
+def test_hat_vee(G, batch, dtype, seed):
+    x = random_tangent(G, seed, batch, dtype, max_angle=5.0)
+    X = G.hat(x)
+    assert X.dtype == dtype and X.shape == (*batch, G.matrix_dim, G.matrix_dim)
+    # hat places the coordinates: exact.
+    np.testing.assert_array_equal(to_np(X), hat_ref(G, x))
+    v = G.vee(X)
+    assert v.dtype == dtype and v.shape == (*batch, G.tangent_dim)
+    np.testing.assert_array_equal(to_np(v), to_np(x))
+    np.testing.assert_array_equal(to_np(G.vee(hat_ref(G, x).astype(dtype))), to_np(x))
+
+
+@over_cases
+@given(seed=seeds)
+def test_vee_ignores_symmetric_part_of_rotation_block(G, batch, dtype, seed):
+    """vee reads the generator coefficients (documented: the symmetric part is ignored)."""
+    x = random_tangent(G, seed, batch, dtype)
+    n = G.space_dim
+    A = np.random.default_rng(seed).normal(size=(*batch, n, n))
+    S = np.zeros((*batch, G.matrix_dim, G.matrix_dim))
+    S[..., :n, :n] = A + np.swapaxes(A, -1, -2)
+    X = (hat_ref(G, x) + S).astype(dtype)
+    assert_close(G.vee(X), vee_ref(G, X), dtype)
+    assert_close(G.vee(X), x, dtype, 4)
+
+
+# ---------------------------------------------------------------------------------
+# Adjoint.
+
+
+@over_cases
+@given(seed=seeds)
+def test_adjoint_identity(G, batch, dtype, seed):
+    """M hat(x) M⁻¹ == hat(Ad x), and T exp(x) == exp(Ad x) T."""
+    T = random_element(G, seed, batch, dtype)
+    x = random_tangent(G, seed, batch, dtype)
+    Ad = T.adjoint()
+    assert Ad.dtype == dtype and Ad.shape == (*batch, G.tangent_dim, G.tangent_dim)
+    M = to_np(T.as_matrix())
+    lhs = M @ hat_ref(G, x) @ np.linalg.inv(M)
+    Adx = np.einsum("...ij,...j->...i", to_np(Ad), to_np(x))
+    assert_close(hat_ref(G, Adx), lhs, dtype, 8)
+    all_close_as_matrices(T @ G.exp(x), G.exp(Adx.astype(dtype)) @ T, dtype, 8)
+
+
+# ---------------------------------------------------------------------------------
+# Operations against the matrix representation.
+
+
+@over_cases
+@given(seed=seeds)
+def test_apply_is_matrix_action(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    p = random_points(G, seed, batch, dtype)
+    got = T.apply(p)
+    assert got.dtype == dtype and got.shape == (*batch, G.space_dim)
+    assert_close(got, homogeneous_apply(G, T.as_matrix(), p), dtype, 4)
+    np.testing.assert_array_equal(to_np(T @ p), to_np(got))
+    # Unbatched points broadcast against the batch.
+    got1 = T.apply(p[(0,) * len(batch)])
+    assert_close(got1, homogeneous_apply(G, T.as_matrix(), np.broadcast_to(
+        to_np(p[(0,) * len(batch)]), (*batch, G.space_dim))), dtype, 4)
+
+
+@over_cases
+@given(seed=seeds)
+def test_multiply_is_matrix_product(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    U = random_element(G, seed + 1, batch, dtype)
+    TU = T.multiply(U)
+    assert TU.parameters().dtype == dtype and TU.get_batch_axes() == batch
+    assert_close(TU.as_matrix(), to_np(T.as_matrix()) @ to_np(U.as_matrix()), dtype, 4)
+    np.testing.assert_array_equal(to_np((T @ U).parameters()), to_np(TU.parameters()))
+
+
+@over_cases
+@given(seed=seeds)
+def test_inverse_is_matrix_inverse(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    Ti = T.inverse()
+    assert Ti.parameters().dtype == dtype
+    assert_close(Ti.as_matrix(), np.linalg.inv(to_np(T.as_matrix())), dtype, 4)
+
+
+@over_cases
+@given(seed=seeds, scale=st.floats(0.5, 2.0))
+def test_normalize(G, batch, dtype, seed, scale):
+    """normalize is a projection: unit elements are fixed, a scaled rotation part is
+    brought back to the same element, and normalizing twice changes nothing."""
+    T = random_element(G, seed, batch, dtype)
+    N = T.normalize()
+    assert N.parameters().dtype == dtype
+    assert_close(N.parameters(), T.parameters(), dtype, 2)
+    k = {SO2: 2, SE2: 2, SO3: 4, SE3: 4}[G]
+    p = np.array(T.parameters())
+    scaled = p.copy()
+    scaled[..., :k] *= scale
+    scaled = G(jnp.asarray(scaled))
+    Ns = scaled.normalize()
+    assert Ns.parameters().dtype == dtype
+    assert_close(Ns.parameters(), p, dtype, 4)
+    assert_close(Ns.normalize().parameters(), Ns.parameters(), dtype, 2)
+    assert_close(np.linalg.norm(to_np(Ns.parameters())[..., :k], axis=-1), np.ones(batch), dtype, 2)
+
+
+# ---------------------------------------------------------------------------------
+# jlog.
+
+
+@over_cases
+@given(seed=seeds)
+def test_jlog_matches_autodiff(G, batch, dtype, seed):
+    """jlog == jax.jacrev(lambda d: (T @ exp(d)).log())(0) (jaxlie's definition)."""
+    T = random_element(G, seed, batch, dtype)
+    J = T.jlog()
+    assert J.dtype == dtype and J.shape == (*batch, G.tangent_dim, G.tangent_dim)
+    ref = _jlog_by_autodiff(T)
+    assert ref.shape == J.shape
+    assert_close(J, ref, dtype, 16)
+
+
+@over_groups_dtypes
+def test_jlog_matches_autodiff_special_elements(G, dtype):
+    T = G.exp(special_tangents(G, dtype))
+    # exclude the exact-π element: log is not differentiable there (branch cut).
+    keep = rotation_angle(G, T.log()) < 3.1
+    T = G(jnp.asarray(np.asarray(T.parameters())[keep]))
+    J = T.jlog()
+    ref = _jlog_by_autodiff(T)
+    assert np.all(np.isfinite(to_np(J)))
+    assert_close(J, ref, dtype, 16)
+
+
+# ---------------------------------------------------------------------------------
+# Interpolation and geodesics.
+
+
+@over_cases
+@given(seed=seeds)
+def test_interpolate_endpoints(G, batch, dtype, seed):
+    T = random_element(G, seed, batch, dtype)
+    U = random_element(G, seed + 1, batch, dtype)
+    T0 = T.interpolate(U, 0.0)
+    T1 = T.interpolate(U, 1.0)
+    assert T0.parameters().dtype == dtype and T0.get_batch_axes() == batch
+    all_close_as_matrices(T0, T, dtype, 2)
+    all_close_as_matrices(T1, U, dtype, 16)
+
+
+def _pair_away_from_pi(G, seed, batch, dtype):
+    """T uniform, U = T exp(x) with |rotation angle of x| ≤ 3 (relative rotation away
+    from π, where the geodesic is unique)."""
+    T = random_element(G, seed, batch, dtype)
+    x = random_tangent(G, seed, batch, dtype, max_angle=3.0)
+    return T, T @ G.exp(x), x
+
+
+def _geodesic_ref(MT, x, G, t):
+    """Body and left forms of the geodesic through MT with body velocity x, with scipy:
+    MT expm(t hat(x)) and expm(t MT hat(x) MT⁻¹) MT (hat from the generators), float64.
+    For U = T exp(x) with |angle(x)| < π, x is log(T⁻¹U)."""
+    import scipy.linalg
+
+    MT = to_np(MT)
+    X = hat_ref(G, x)
+    X = np.broadcast_to(X, MT.shape)
+    t = np.broadcast_to(np.asarray(t, np.float64), MT.shape[:-2])
+    body = np.empty_like(MT)
+    left = np.empty_like(MT)
+    for idx in np.ndindex(MT.shape[:-2]):
+        A = MT[idx]
+        body[idx] = A @ scipy.linalg.expm(t[idx] * X[idx])
+        left[idx] = scipy.linalg.expm(t[idx] * (A @ X[idx] @ np.linalg.inv(A))) @ A
+    return body, left
+
+
+@over_cases
+@given(seed=seeds, t=st.sampled_from([0.5, 0.25, 0.9, -0.3, 1.7]))
+def test_interpolate_is_geodesic(G, batch, dtype, seed, t):
+    """T.interpolate(U, t) == T expm(t log(T⁻¹U)) == expm(t log(U T⁻¹)) T,
+    away from a relative rotation of π; t = 0.5 is the geodesic midpoint. (Reference:
+    U = T exp(x), whose relative log is x, and scipy's expm.)"""
+    T, U, x = _pair_away_from_pi(G, seed, batch, dtype)
+    got = T.interpolate(U, t)
+    assert got.parameters().dtype == dtype and got.get_batch_axes() == batch
+    body, left = _geodesic_ref(T.as_matrix(), x, G, t)
+    assert_close(got.as_matrix(), body, dtype, 32)
+    assert_close(got.as_matrix(), left, dtype, 32)
+
+
+@over_cases
+@given(seed=seeds, t=st.floats(-1.0, 2.0))
+def test_geodesic_path_equals_interpolate(G, batch, dtype, seed, t):
+    T = random_element(G, seed, batch, dtype)
+    U = random_element(G, seed + 1, batch, dtype)
+    path = jaxlie_geo.geodesic(T, U)
+    got = path(t)
+    assert got.parameters().dtype == dtype
+    assert_close(got.parameters(), T.interpolate(U, t).parameters(), dtype)
+    # the path is a pytree: it goes through jit.
+    jitted = _call_path(path, np.asarray(t, dtype))
+    assert_close(jitted.parameters(), got.parameters(), dtype, 2)
+
+
+@over_groups_dtypes
+@given(seed=seeds)
+def test_interpolate_time_broadcasting(G, dtype, seed):
+    T, U, x = _pair_away_from_pi(G, seed, (), dtype)
+    ts = np.asarray([0.0, 0.2, 0.5, 1.0, 2.0], dtype)
+    # unbatched endpoints, t of shape (K,) -> K poses
+    path = T.interpolate(U, ts)
+    assert path.get_batch_axes() == (5,) and path.parameters().dtype == dtype
+    for k in range(5):
+        assert_close(path[k].as_matrix(), T.interpolate(U, float(ts[k])).as_matrix(), dtype, 2)
+    # extrapolation t = 2: T exp(2 log(T⁻¹U)) = T exp(2x)
+    all_close_as_matrices(path[4], T @ G.exp(2 * x), dtype, 32)
+    body, _ = _geodesic_ref(T.as_matrix(), x, G, 2.0)
+    assert_close(path[4].as_matrix(), body, dtype, 64)
+    # batched endpoints (3,), outer product t[:, None] -> (K, 3)
+    Tb, Ub, xb = _pair_away_from_pi(G, seed, (3,), dtype)
+    grid = Tb.interpolate(Ub, ts[:, None])
+    assert grid.get_batch_axes() == (5, 3) and grid.parameters().dtype == dtype
+    MT = np.broadcast_to(to_np(Tb.as_matrix()), (5, 3, G.matrix_dim, G.matrix_dim))
+    body, _ = _geodesic_ref(MT, xb, G, np.broadcast_to(to_np(ts)[:, None], (5, 3)))
+    assert_close(grid.as_matrix(), body, dtype, 64)
+    # geodesic object with the same broadcasting
+    assert_close(jaxlie_geo.geodesic(Tb, Ub)(ts[:, None]).parameters(), grid.parameters(), dtype)
+
+
+# ---------------------------------------------------------------------------------
+# Batch handling.
+
+
+@over_groups_dtypes
+@given(seed=seeds)
+def test_indexing_reshape_stack(G, dtype, seed):
+    T = random_element(G, seed, (2, 4), dtype)
+    p = to_np(T.parameters())
+    assert len(T) == 2
+    np.testing.assert_array_equal(to_np(T[0].parameters()), p[0])
+    np.testing.assert_array_equal(to_np(T[:, 1].parameters()), p[:, 1])
+    np.testing.assert_array_equal(to_np(T[-1, 2].parameters()), p[-1, 2])
+    np.testing.assert_array_equal(to_np(T[..., 1:3].parameters()), p[:, 1:3])
+    assert T[0].get_batch_axes() == (4,) and T[:, 1].get_batch_axes() == (2,)
+    assert T[1, 3].get_batch_axes() == ()
+    assert type(T[0]) is G and T[0].parameters().dtype == dtype
+    R = T.reshape((8,))
+    assert R.get_batch_axes() == (8,)
+    np.testing.assert_array_equal(to_np(R.parameters()), p.reshape(8, -1))
+    assert T.reshape(4, 2).get_batch_axes() == (4, 2)
+    np.testing.assert_array_equal(to_np(T.reshape(4, 2).parameters()), p.reshape(4, 2, -1))
+    S0 = jaxlie_geo.stack([T[0], T[1]], axis=0)
+    np.testing.assert_array_equal(to_np(S0.parameters()), p)
+    S1 = jaxlie_geo.stack([T[0], T[1]], axis=1)
+    assert S1.get_batch_axes() == (4, 2)
+    np.testing.assert_array_equal(to_np(S1.parameters()), np.swapaxes(p, 0, 1))
+    Su = jaxlie_geo.stack([T[0, 0], T[1, 1], T[0, 3]])
+    assert Su.get_batch_axes() == (3,) and Su.parameters().dtype == dtype
+    np.testing.assert_array_equal(to_np(Su.parameters()), p[[0, 1, 0], [0, 1, 3]])
+    # an indexed element behaves like the element itself
+    assert_close(T[1, 2].log(), to_np(T.log())[1, 2], dtype)
+
+
+@over_groups_dtypes
+@given(seed=seeds)
+def test_batch_axes_broadcast_between_operands(G, dtype, seed):
+    P = G.parameters_dim
+    T = G(jnp.asarray(np.asarray(random_element(G, seed, (3,), dtype).parameters())[:, None]))
+    U = G(jnp.asarray(np.asarray(random_element(G, seed, (2, 4), dtype).parameters())[:1]))
+    assert T.get_batch_axes() == (3, 1) and U.get_batch_axes() == (1, 4)
+    MT, MU = to_np(T.as_matrix()), to_np(U.as_matrix())
+    TU = T @ U
+    assert TU.get_batch_axes() == (3, 4) and TU.parameters().dtype == dtype
+    assert_close(TU.as_matrix(), MT @ MU, dtype, 4)
+    p = random_points(G, seed, (1, 4), dtype)
+    got = T @ p
+    assert got.shape == (3, 4, G.space_dim) and got.dtype == dtype
+    assert_close(got, homogeneous_apply(G, np.broadcast_to(MT, (3, 4, *MT.shape[-2:])),
+                                        np.broadcast_to(to_np(p), (3, 4, G.space_dim))), dtype, 4)
+    # interpolate broadcasts endpoints and times like explicit broadcasting does
+    ts = np.linspace(0.0, 1.0, 4).astype(dtype)
+    got = T.interpolate(U, ts)
+    assert got.get_batch_axes() == (3, 4) and got.parameters().dtype == dtype
+    T_full = G(jnp.asarray(np.broadcast_to(np.asarray(T.parameters()), (3, 4, P))))
+    U_full = G(jnp.asarray(np.broadcast_to(np.asarray(U.parameters()), (3, 4, P))))
+    want = T_full.interpolate(U_full, np.broadcast_to(ts, (3, 4)))
+    assert_close(got.parameters(), want.parameters(), dtype)
+    # an SE element built from a batched rotation and a translation broadcasts too
+    if is_se(G):
+        t = np.zeros((1, 4, G.space_dim), dtype)
+        assert G.from_rotation_and_translation(T.rotation(), t).get_batch_axes() == (3, 4)
+
+
+# ---------------------------------------------------------------------------------
+# dtype in == dtype out, for every public function.
+
+
+def _public_calls(G):
+    """name -> function of a context dict, returning whatever the public function returns."""
+    calls = {
+        "identity": lambda c: G.identity((3,), dtype=c["dtype"]),
+        "identity_unbatched": lambda c: G.identity(dtype=c["dtype"]),
+        "sample_uniform": lambda c: G.sample_uniform(key_of(1), (3,), dtype=c["dtype"]),
+        "exp": lambda c: G.exp(c["x"]),
+        "log": lambda c: c["T"].log(),
+        "multiply": lambda c: c["T"].multiply(c["U"]),
+        "matmul_group": lambda c: c["T"] @ c["U"],
+        "apply": lambda c: c["T"].apply(c["p"]),
+        "matmul_points": lambda c: c["T"] @ c["p"],
+        "inverse": lambda c: c["T"].inverse(),
+        "adjoint": lambda c: c["T"].adjoint(),
+        "jlog": lambda c: c["T"].jlog(),
+        "as_matrix": lambda c: c["T"].as_matrix(),
+        "from_matrix": lambda c: G.from_matrix(c["T"].as_matrix()),
+        "parameters": lambda c: c["T"].parameters(),
+        "normalize": lambda c: c["T"].normalize(),
+        "interpolate": lambda c: c["T"].interpolate(c["U"], 0.3),
+        "interpolate_array_t": lambda c: c["T"].interpolate(c["U"], c["t"]),
+        "geodesic": lambda c: jaxlie_geo.geodesic(c["T"], c["U"])(c["t"]),
+        "hat": lambda c: G.hat(c["x"]),
+        "vee": lambda c: G.vee(G.hat(c["x"])),
+        "getitem": lambda c: c["T"][0],
+        "reshape": lambda c: c["T"].reshape(3, 1),
+        "stack": lambda c: jaxlie_geo.stack([c["T"], c["U"]]),
+        "jac_right": lambda c: G.jac_right(c["x"]),
+        "jac_right_inv": lambda c: G.jac_right_inv(c["x"]),
+        "jac_left": lambda c: G.jac_left(c["x"]),
+        "jac_left_inv": lambda c: G.jac_left_inv(c["x"]),
+        "ad": lambda c: G.ad(c["x"]),
+    }
+    if G is SO2:
+        calls.update(
+            from_radians=lambda c: SO2.from_radians(c["theta"]),
+            as_radians=lambda c: c["T"].as_radians(),
+        )
+    if G is SO3:
+        calls.update(
+            from_x_radians=lambda c: SO3.from_x_radians(c["theta"]),
+            from_y_radians=lambda c: SO3.from_y_radians(c["theta"]),
+            from_z_radians=lambda c: SO3.from_z_radians(c["theta"]),
+            from_rpy_radians=lambda c: SO3.from_rpy_radians(c["theta"], c["theta"], c["theta"]),
+            from_quaternion_xyzw=lambda c: SO3.from_quaternion_xyzw(c["T"].wxyz),
+            as_quaternion_xyzw=lambda c: c["T"].as_quaternion_xyzw(),
+            as_rpy_radians=lambda c: tuple(c["T"].as_rpy_radians()),
+            compute_roll_radians=lambda c: c["T"].compute_roll_radians(),
+            compute_pitch_radians=lambda c: c["T"].compute_pitch_radians(),
+            compute_yaw_radians=lambda c: c["T"].compute_yaw_radians(),
+        )
+    if G is SE2:
+        calls.update(
+            from_xy_theta=lambda c: SE2.from_xy_theta(c["theta"], c["theta"], c["theta"]),
+        )
+    if is_se(G):
+        calls.update(
+            from_rotation_and_translation=lambda c: G.from_rotation_and_translation(
+                c["T"].rotation(), c["p"]
+            ),
+            from_rotation=lambda c: G.from_rotation(c["T"].rotation()),
+            from_translation=lambda c: G.from_translation(c["p"]),
+            rotation=lambda c: c["T"].rotation(),
+            translation=lambda c: c["T"].translation(),
+        )
+    return calls
+
+
+_DTYPE_CASES = [
+    pytest.param(G, name, d, id=f"{G.__name__}-{name}-{jnp.dtype(d).name}")
+    for G in GROUPS
+    for name in _public_calls(G)
+    for d in (jnp.float32, jnp.float64)
+]
+
+
+@pytest.mark.parametrize(("G", "name", "dtype"), _DTYPE_CASES)
+def test_dtype_in_equals_dtype_out(G, name, dtype):
+    # batch (3,), as in the harness, so that compiled functions are shared.
+    ctx = {
+        "dtype": dtype,
+        "T": random_element(G, 7, (3,), dtype),
+        "U": random_element(G, 8, (3,), dtype),
+        "x": random_tangent(G, 7, (3,), dtype),
+        "p": np.ones((3, G.space_dim), dtype),
+        "t": np.asarray([0.25, 0.75, 1.5], dtype),
+        "theta": np.asarray([0.1, -0.4, 2.0], dtype),
+    }
+    out = _public_calls(G)[name](ctx)
+    dtypes = param_dtypes(out)
+    assert dtypes == {jnp.dtype(dtype)}, f"{G.__name__}.{name}: {dtype} in, {dtypes} out"
+    for leaf in jax.tree.leaves(out):
+        assert np.all(np.isfinite(to_np(leaf)))
+
+
+# ---------------------------------------------------------------------------------
+# Integer inputs are promoted to float.
+
+
+@over_groups
+def test_integer_inputs_promoted_to_float(G):
+    k = G.tangent_dim
+    T = G.exp(np.zeros((3, k), np.int32))
+    assert jnp.issubdtype(T.parameters().dtype, jnp.floating)
+    np.testing.assert_array_equal(to_np(T.as_matrix()), _eye(G, (3,)))
+    M = G.from_matrix(np.eye(G.matrix_dim, dtype=np.int64))
+    assert jnp.issubdtype(M.parameters().dtype, jnp.floating)
+    np.testing.assert_array_equal(to_np(M.as_matrix()), np.eye(G.matrix_dim))
+    assert jnp.issubdtype(G.hat(np.arange(k)).dtype, jnp.floating)
+    assert jnp.issubdtype(G.vee(np.zeros((G.matrix_dim,) * 2, np.int32)).dtype, jnp.floating)
+    p = np.arange(G.space_dim)
+    I = G.identity()
+    out = I.apply(p)
+    assert jnp.issubdtype(out.dtype, jnp.floating)
+    np.testing.assert_array_equal(to_np(out), p)
+    if is_se(G):
+        Tt = G.from_translation(np.arange(G.space_dim))
+        assert jnp.issubdtype(Tt.parameters().dtype, jnp.floating)
+        np.testing.assert_array_equal(to_np(Tt.translation()), np.arange(G.space_dim))
+
+
+@over_groups
+def test_integer_inputs_keep_float32_of_the_element(G):
+    """Mixing a float32 element with integer data gives float32, as JAX's promotion does
+    (int ⊕ float32 → float32), so dtype in == dtype out also for integer points."""
+    T = random_element(G, 3, (3,), jnp.float32)
+    out = T.apply(np.ones((3, G.space_dim), np.int32))
+    assert out.dtype == jnp.float32, out.dtype
+    assert T.interpolate(T, 1).parameters().dtype == jnp.float32
+    if is_se(G):
+        R = T.rotation()
+        E = G.from_rotation_and_translation(R, np.ones((3, G.space_dim), np.int32))
+        assert E.parameters().dtype == jnp.float32, E.parameters().dtype
+
+
+def test_integer_factories():
+    assert jnp.issubdtype(SO2.from_radians(1).parameters().dtype, jnp.floating)
+    assert_close(SO2.from_radians(1).as_radians(), 1.0, jnp.float64)
+    E = SE2.from_xy_theta(1, 2, 0)
+    assert jnp.issubdtype(E.parameters().dtype, jnp.floating)
+    assert_close(E.translation(), [1.0, 2.0], jnp.float64)
+    R = SO3.from_z_radians(np.int32(0))
+    assert jnp.issubdtype(R.parameters().dtype, jnp.floating)
+    Q = SO3.from_quaternion_xyzw(np.array([0, 0, 0, 1]))
+    assert jnp.issubdtype(Q.parameters().dtype, jnp.floating)
+    np.testing.assert_array_equal(to_np(Q.wxyz), [1.0, 0.0, 0.0, 0.0])

@@ -1,0 +1,360 @@
+"""JAX transformations on every group: jit, vmap, grad, jacfwd, jacrev, hessian, scan,
+eval_shape and pytree manipulation.
+
+Derivatives are checked against central finite differences in float64; jit against eager
+calls; vmap against the batched call; the constructor must accept any leaf (tracers,
+ShapeDtypeStructs, shapes, axis specs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import (
+    LAYOUT,
+    assert_close,
+    is_se,
+    over_groups,
+    over_groups_dtypes,
+    random_element,
+    random_points,
+    random_tangent,
+    seeds,
+    to_np,
+)
+from hypothesis import given
+
+import jax
+import jax.numpy as jnp
+import jaxlie_geo
+
+
+def _central_diff(f, x, h):
+    """Jacobian of f at x (float64 numpy) by central differences: (*out, *x.shape)."""
+    x = np.asarray(x, np.float64)
+    f0 = np.asarray(f(x))
+    J = np.zeros((*f0.shape, x.size))
+    for i in range(x.size):
+        e = np.zeros(x.size)
+        e[i] = h
+        e = e.reshape(x.shape)
+        J[..., i] = (np.asarray(f(x + e)) - np.asarray(f(x - e))) / (2 * h)
+    return J.reshape(*f0.shape, *x.shape)
+
+
+def _pipeline(G):
+    """A scalar loss through exp, compose, inverse, apply and log."""
+
+    def loss(x, T, U, p):
+        V = T @ G.exp(x) @ U.inverse()
+        w = jnp.arange(1, G.tangent_dim + 1, dtype=x.dtype)
+        return jnp.sum(w * V.log()) + jnp.sum(jnp.sin(V @ p)) + jnp.sum(V.log() ** 2)
+
+    return loss
+
+
+# ---------------------------------------------------------------------------------
+# jit
+
+
+@over_groups_dtypes
+@given(seed=seeds)
+def test_jit_equals_eager(G, dtype, seed):
+    T = random_element(G, seed, (3,), dtype)
+    U = random_element(G, seed + 1, (3,), dtype)
+    x = random_tangent(G, seed, (3,), dtype)
+    p = random_points(G, seed, (3,), dtype)
+
+    def f(T, U, x, p):
+        V = T @ G.exp(x)
+        return (
+            V.log(),
+            (V @ U.inverse()).parameters(),
+            V @ p,
+            V.jlog(),
+            V.adjoint(),
+            V.as_matrix(),
+            G.from_matrix(V.as_matrix()).parameters(),
+            T.interpolate(U, 0.3).parameters(),
+            G.vee(G.hat(x)),
+        )
+
+    eager = f(T, U, x, p)
+    jitted = _jit_f(f, G)(T, U, x, p)
+    for a, b in zip(eager, jitted):
+        assert a.dtype == b.dtype == dtype
+        assert_close(b, a, dtype, 4)
+
+
+_JITTED = {}
+
+
+def _jit_f(f, G):
+    # One jitted wrapper per code object and group (f closes over G), so that hypothesis
+    # examples reuse compilations.
+    key = (f.__code__, G)
+    if key not in _JITTED:
+        _JITTED[key] = jax.jit(f)
+    return _JITTED[key]
+
+
+# ---------------------------------------------------------------------------------
+# vmap
+
+
+@over_groups_dtypes
+@given(seed=seeds)
+def test_vmap_equals_batched_call(G, dtype, seed):
+    T = random_element(G, seed, (3,), dtype)
+    x = random_tangent(G, seed, (3,), dtype)
+    p = random_points(G, seed, (3,), dtype)
+
+    def f(T, x, p):
+        V = T @ G.exp(x)
+        return V.log(), V @ p, V.jlog(), V.as_matrix(), V.inverse().parameters()
+
+    batched = f(T, x, p)
+    mapped = jax.vmap(f)(T, x, p)
+    for a, b in zip(batched, mapped):
+        assert b.dtype == dtype
+        assert_close(b, a, dtype, 4)
+    # an unbatched element mapped against batched tangents
+    T0 = T[0]
+    mapped0 = jax.vmap(f, in_axes=(None, 0, 0))(T0, x, p)
+    for a, b in zip(f(T0, x, p), mapped0):
+        assert_close(b, a, dtype, 4)
+
+
+@over_groups_dtypes
+def test_vmap_with_group_instance_as_axis_spec(G, dtype):
+    """in_axes/out_axes given as a group instance with integer leaves (the constructor must
+    not validate)."""
+    T = random_element(G, 1, (2, 4), dtype)
+    p = random_points(G, 1, (4, 2), dtype)
+    # map over the second batch axis of T (parameters axis 1) and the first of p
+    out = jax.vmap(lambda T, p: T @ p, in_axes=(G(1), 0))(T, p)
+    assert out.shape == (4, 2, G.space_dim)
+    want = np.swapaxes(to_np(T @ np.swapaxes(p, 0, 1)), 0, 1)
+    assert_close(out, want, dtype, 2)
+    # out_axes as a group spec: put the mapped axis second
+    x = random_tangent(G, 1, (4, 2), dtype)
+    E = jax.vmap(G.exp, out_axes=G(1))(x)
+    assert E.get_batch_axes() == (2, 4)
+    assert_close(E.parameters(), np.swapaxes(to_np(G.exp(x).parameters()), 0, 1), dtype)
+
+
+# ---------------------------------------------------------------------------------
+# Derivatives against finite differences (float64).
+
+
+@over_groups
+@given(seed=seeds)
+def test_grad_matches_finite_differences(G, seed):
+    dtype = jnp.float64
+    T = random_element(G, seed, (), dtype)
+    U = random_element(G, seed + 1, (), dtype)
+    x = random_tangent(G, seed, (), dtype, max_angle=2.5)
+    p = random_points(G, seed, (), dtype)
+    loss = _pipeline(G)
+    g = jax.grad(loss)(x, T, U, p)
+    fd = _central_diff(lambda y: loss(jnp.asarray(y), T, U, p), x, 1e-6)
+    np.testing.assert_allclose(to_np(g), fd, rtol=1e-6, atol=1e-7)
+    # gradient with respect to the raw parameters of T and U, and to the points
+    gT, gU, gp = jax.grad(lambda T, U, p: loss(jnp.asarray(x), T, U, p), argnums=(0, 1, 2))(
+        T, U, p
+    )
+    assert isinstance(gT, G) and isinstance(gU, G)
+    for P, gP, rebuild in (
+        (T.parameters(), gT.parameters(), lambda q: loss(x, G(q), U, p)),
+        (U.parameters(), gU.parameters(), lambda q: loss(x, T, G(q), p)),
+        (p, gp, lambda q: loss(x, T, U, q)),
+    ):
+        fd = _central_diff(lambda q: rebuild(jnp.asarray(q)), to_np(P), 1e-6)
+        np.testing.assert_allclose(to_np(gP), fd, rtol=1e-6, atol=1e-7)
+
+
+@over_groups
+@given(seed=seeds)
+def test_jacfwd_jacrev_agree_with_finite_differences(G, seed):
+    dtype = jnp.float64
+    T = random_element(G, seed, (), dtype)
+    x = random_tangent(G, seed, (), dtype, max_angle=2.5)
+    p = random_points(G, seed, (), dtype)
+
+    def f(x):
+        V = T @ G.exp(x)
+        return jnp.concatenate([V.log(), V @ p, V.parameters()])
+
+    Jf = jax.jacfwd(f)(x)
+    Jr = jax.jacrev(f)(x)
+    fd = _central_diff(lambda y: f(jnp.asarray(y)), x, 1e-6)
+    np.testing.assert_allclose(to_np(Jf), to_np(Jr), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(to_np(Jf), fd, rtol=1e-6, atol=1e-7)
+
+
+@over_groups
+@given(seed=seeds)
+def test_hessian_consistency(G, seed):
+    dtype = jnp.float64
+    T = random_element(G, seed, (), dtype)
+    U = random_element(G, seed + 1, (), dtype)
+    x = random_tangent(G, seed, (), dtype, max_angle=2.5)
+    p = random_points(G, seed, (), dtype)
+    loss = _pipeline(G)
+    H = jax.hessian(loss)(x, T, U, p)
+    H_fr = jax.jacfwd(jax.jacrev(loss))(x, T, U, p)
+    H_rf = jax.jacrev(jax.jacfwd(loss))(x, T, U, p)
+    np.testing.assert_allclose(to_np(H), to_np(H).T, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(to_np(H_fr), to_np(H), rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(to_np(H_rf), to_np(H), rtol=1e-10, atol=1e-10)
+    grad = jax.grad(loss)
+    fd = _central_diff(lambda y: grad(jnp.asarray(y), T, U, p), x, 1e-5)
+    np.testing.assert_allclose(to_np(H), fd, rtol=1e-5, atol=1e-6)
+
+
+@over_groups
+def test_grad_through_interpolation_time(G):
+    dtype = jnp.float64
+    T = random_element(G, 3, (), dtype)
+    U = T @ G.exp(random_tangent(G, 3, (), dtype, max_angle=2.0))
+
+    def f(t):
+        return jnp.sum(jnp.cos(T.interpolate(U, t).parameters()))
+
+    for t in (0.0, 0.4, 1.0, 1.6):
+        g = jax.grad(f)(jnp.asarray(t, dtype))
+        fd = (f(t + 1e-6) - f(t - 1e-6)) / 2e-6
+        np.testing.assert_allclose(float(g), float(fd), rtol=1e-6, atol=1e-8)
+    path = jaxlie_geo.geodesic(T, U)
+    g = jax.grad(lambda t: jnp.sum(jnp.cos(path(t).parameters())))(jnp.asarray(0.4, dtype))
+    np.testing.assert_allclose(float(g), float(jax.grad(f)(jnp.asarray(0.4, dtype))), rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------------
+# Derivatives at the delicate points: exactly zero, pure translations, tiny angles.
+
+
+def _delicate_tangents(G, dtype):
+    rot, trans = LAYOUT[G]
+    out = [np.zeros(G.tangent_dim)]
+    tiny = np.zeros(G.tangent_dim)
+    tiny[rot] = 1e-9
+    out.append(tiny)
+    if is_se(G):
+        pure = np.zeros(G.tangent_dim)
+        pure[trans] = np.linspace(1.0, 2.0, trans.stop - trans.start)
+        out.append(pure)
+        big = pure * 100.0
+        out.append(big)
+    return np.stack(out).astype(dtype)
+
+
+@over_groups_dtypes
+def test_derivatives_of_log_exp_at_zero_and_pure_translation(G, dtype):
+    """d log(exp(x))/dx = I and d² log(exp(x))/dx² = 0, with no NaN, at x = 0, at a
+    1e-9 rotation and at pure translations (forward and reverse mode)."""
+    k = G.tangent_dim
+    eps = float(jnp.finfo(dtype).eps)
+
+    def f(x):
+        return G.exp(x).log()
+
+    for x in _delicate_tangents(G, dtype):
+        scale = max(1.0, float(np.max(np.abs(x))))
+        Jf = to_np(jax.jacfwd(f)(x))
+        Jr = to_np(jax.jacrev(f)(x))
+        for J in (Jf, Jr):
+            assert np.all(np.isfinite(J)), (x, J)
+            np.testing.assert_allclose(J, np.eye(k), rtol=0, atol=16 * eps * scale)
+        H = to_np(jax.hessian(lambda y: jnp.sum(f(y)))(x))
+        assert np.all(np.isfinite(H)), (x, H)
+        np.testing.assert_allclose(H, 0.0, atol=64 * eps * scale)
+
+
+@over_groups_dtypes
+def test_no_nan_gradients_at_identity_and_pure_translation(G, dtype):
+    """Gradients of losses through log, jlog, exp and compose at the identity and at
+    pure translations (where 0/0 forms lurk) are finite and match finite differences."""
+    I = G.identity(dtype=dtype)
+    elements = [I]
+    if is_se(G):
+        elements.append(G.from_translation(np.linspace(0.5, -1.5, G.space_dim).astype(dtype)))
+
+    for T in elements:
+        P = T.parameters()
+        g_log = jax.grad(lambda q: jnp.sum(G(q).log() ** 2) + jnp.sum(G(q).log()))(P)
+        g_jlog = jax.grad(lambda q: jnp.sum(G(q).jlog()))(P)
+        g_exp = jax.grad(lambda x: jnp.sum((T @ G.exp(x)).parameters()))(
+            np.zeros(G.tangent_dim, dtype)
+        )
+        for g in (g_log, g_jlog, g_exp):
+            assert np.all(np.isfinite(to_np(g))), g
+        # log(T exp(d)) = log(T) + J d: its gradient in d at 0 is J^T 1 (jlog at T)
+        g = jax.grad(lambda d: jnp.sum((T @ G.exp(d)).log()))(np.zeros(G.tangent_dim, dtype))
+        want = to_np(T.jlog()).sum(axis=0)
+        assert_close(g, want, dtype, 4)
+        if dtype == jnp.float64:
+            fd = _central_diff(
+                lambda d: (T @ G.exp(jnp.asarray(d))).log(), np.zeros(G.tangent_dim), 1e-6
+            )
+            np.testing.assert_allclose(to_np(T.jlog()), fd, rtol=1e-7, atol=1e-8)
+
+
+# ---------------------------------------------------------------------------------
+# Pytree behaviour.
+
+
+@over_groups_dtypes
+def test_tree_map_eval_shape_and_leaves(G, dtype):
+    T = random_element(G, 5, (2, 4), dtype)
+    shapes = jax.tree.map(lambda a: a.shape, T)
+    assert isinstance(shapes, G)
+    assert shapes.parameters() == (2, 4, G.parameters_dim)
+    leaves, treedef = jax.tree.flatten(T)
+    assert len(leaves) == 1 and leaves[0].shape == (2, 4, G.parameters_dim)
+    assert isinstance(jax.tree.unflatten(treedef, leaves), G)
+    # eval_shape of a factory and of a method
+    spec = jax.ShapeDtypeStruct((5, G.tangent_dim), dtype)
+    out = jax.eval_shape(G.exp, spec)
+    assert isinstance(out, G)
+    assert out.parameters().shape == (5, G.parameters_dim)
+    assert out.parameters().dtype == dtype
+    abstract = G(jax.ShapeDtypeStruct((3, G.parameters_dim), dtype))
+    logs = jax.eval_shape(lambda T: T.log(), abstract)
+    assert logs.shape == (3, G.tangent_dim) and logs.dtype == dtype
+    mats = jax.eval_shape(lambda T, U: (T @ U).as_matrix(), abstract, abstract)
+    assert mats.shape == (3, G.matrix_dim, G.matrix_dim) and mats.dtype == dtype
+
+
+@over_groups_dtypes
+def test_scan_and_cond_carry_group_elements(G, dtype):
+    """A trajectory integrated with lax.scan equals the Python loop; lax.cond selects
+    between two elements."""
+    xs = random_tangent(G, 11, (6,), dtype, max_angle=0.5)
+    T0 = random_element(G, 11, (), dtype)
+
+    def step(T, x):
+        T = T @ G.exp(x)
+        return T, T.parameters()
+
+    T_end, traj = jax.lax.scan(step, T0, xs)
+    T = T0
+    for i in range(6):
+        T = T @ G.exp(xs[i])
+        assert_close(traj[i], T.parameters(), dtype, 8)
+    assert_close(T_end.parameters(), T.parameters(), dtype, 8)
+    assert T_end.parameters().dtype == dtype
+    chosen = jax.jit(lambda c, a, b: jax.lax.cond(c, lambda: a, lambda: b))(
+        True, T0, T_end
+    )
+    assert isinstance(chosen, G)
+    np.testing.assert_array_equal(to_np(chosen.parameters()), to_np(T0.parameters()))
+
+
+@pytest.mark.parametrize("batch_axes", [[2], (2, 3)], ids=["list", "tuple"])
+def test_static_batch_axes_accept_lists(batch_axes):
+    for G in (jaxlie_geo.SO3, jaxlie_geo.SE2):
+        assert G.identity(batch_axes).get_batch_axes() == tuple(batch_axes)
+        assert G.sample_uniform(jax.random.PRNGKey(0), batch_axes).get_batch_axes() == tuple(
+            batch_axes
+        )
