@@ -325,14 +325,18 @@ class SO3(SOBase):
 
     @override
     def as_matrix(self) -> jax.Array:
-        w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wx, wy, wz = w * x, w * y, w * z
+        """Rotation matrix of q/|q| (as jaxlie: a non-unit quaternion still gives a
+        rotation), ``(*batch, 3, 3)``."""
+        q = self.wxyz
+        w, x, y, z = (q[..., i] for i in range(4))
+        s = 2.0 / sq_norm(q)
+        xx, yy, zz = s * x * x, s * y * y, s * z * z
+        xy, xz, yz = s * x * y, s * x * z, s * y * z
+        wx, wy, wz = s * w * x, s * w * y, s * w * z
         rows = [
-            [1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)],
-            [2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)],
-            [2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)],
+            [1.0 - (yy + zz), xy - wz, xz + wy],
+            [xy + wz, 1.0 - (xx + zz), yz - wx],
+            [xz - wy, yz + wx, 1.0 - (xx + yy)],
         ]
         return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
 
