@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Generic, TypeVar
 
 import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array
+from ._base import MatrixLieGroup, as_float_array, pytree_dataclass
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True, eq=False)
+@pytree_dataclass
 class Geodesic(Generic[GroupT]):
     """The geodesic ``t ↦ start @ exp(t · tangent)``, a pytree (jit/vmap friendly).
 

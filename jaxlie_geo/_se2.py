@@ -2,19 +2,17 @@
 
 from __future__ import annotations
 
-import dataclasses
 
 import jax
 import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array
+from ._base import SEBase, as_float_array, pytree_dataclass
 from ._so2 import SO2
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True, eq=False)
+@pytree_dataclass
 class SE2(SEBase[SO2]):
     """Special Euclidean group of planar rigid transforms ``x ↦ R x + t``.
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Optional, Tuple
 
 import jax
@@ -10,7 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array
+from ._base import SEBase, as_float_array, pytree_dataclass
 from ._so3 import (
     SO3,
     cross,
@@ -87,8 +86,7 @@ def log_translation(
 _KERNEL_FORM = "seed000"  # more accurate (see the docstrings); speed in benchmarks/RESULTS.md
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True, eq=False)
+@pytree_dataclass
 class SE3(SEBase[SO3]):
     """Special Euclidean group of 3D rigid transforms ``x ↦ R x + t``.
 

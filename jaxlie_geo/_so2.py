@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Tuple
 
 import jax
@@ -10,11 +9,10 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import hints
-from ._base import SOBase, as_float_array, resolve_dtype
+from ._base import SOBase, as_float_array, pytree_dataclass, resolve_dtype
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True, eq=False)
+@pytree_dataclass
 class SO2(SOBase):
     """Special orthogonal group of planar rotations.
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Optional, Tuple
 
 import jax
@@ -10,7 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SOBase, as_float_array, resolve_dtype
+from ._base import SOBase, as_float_array, pytree_dataclass, resolve_dtype
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -130,8 +129,7 @@ def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
     return eye + 0.5 * skew(omega) + _scalar.G(sq_norm(omega))[..., None, None] * skew_sq(omega)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True, eq=False)
+@pytree_dataclass
 class SO3(SOBase):
     """Special orthogonal group of 3D rotations.
 

@@ -13,14 +13,13 @@ circular arc of signed curvature ω/|v| (a line when ω = 0); in space, a helix.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import TypeVar
 
 import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array
+from ._base import MatrixLieGroup, as_float_array, pytree_dataclass
 from ._geodesic import Geodesic
 from ._se2 import SE2
 
@@ -71,8 +70,7 @@ def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
     return Geodesic(start, velocity)(t)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True, eq=False)
+@pytree_dataclass
 class Arc:
     """The planar path of ``pose_at(start, velocity, t)`` for SE(2), in the world frame.
 
