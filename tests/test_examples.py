@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-HAVE_JAXLIE = importlib.util.find_spec("jaxlie") is not None
+HAVE_JAXLIE = importlib.util.find_spec("jaxlie") is not None  # the test extra installs it
 
 
 def _float(pattern: str, text: str) -> float:

@@ -1,0 +1,158 @@
+"""Wrong inputs raise at trace time, with messages that name the function, the expected
+and the received shape; constructors do not validate."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from conftest import GROUPS, is_se, over_groups, random_element
+
+import jax
+import jax.numpy as jnp
+import jaxlie_geo
+from jaxlie_geo import SE2, SE3, SO2, SO3
+
+
+def _shape_cases():
+    """(id, function of one array, bad input shape, expected trailing shape, name in message)."""
+    cases = []
+    for G in GROUPS:
+        k, n, d = G.tangent_dim, G.matrix_dim, G.space_dim
+        g = G.__name__
+        # identity built from its parameters: nothing is computed at collection time
+        T = G(np.eye(1, G.parameters_dim)[0])
+        cases += [
+            (f"{g}.exp-extra", G.exp, (k + 1,), (k,), "exp"),
+            (f"{g}.exp-batched", G.exp, (5, k + 2), (k,), "exp"),
+            (f"{g}.exp-scalar", G.exp, (), (k,), "exp"),
+            (f"{g}.from_matrix-square", G.from_matrix, (n + 1, n + 1), (n, n), "from_matrix"),
+            (f"{g}.from_matrix-rect", G.from_matrix, (5, n, n + 1), (n, n), "from_matrix"),
+            (f"{g}.from_matrix-flat", G.from_matrix, (n * n,), (n, n), "from_matrix"),
+            (f"{g}.apply-homogeneous", T.apply, (d + 1,), (d,), "apply"),
+            (f"{g}.apply-batched", T.apply, (4, d - 1), (d,), "apply"),
+            (f"{g}.hat", G.hat, (k + 1,), (k,), "hat"),
+            (f"{g}.vee-rect", G.vee, (n, n + 1), (n, n), "vee"),
+            (f"{g}.vee-square", G.vee, (3, n + 1, n + 1), (n, n), "vee"),
+            (f"{g}.jac_right", G.jac_right, (k + 1,), (k,), "jac_right"),
+            (f"{g}.jac_right_inv", G.jac_right_inv, (2, k + 1), (k,), "jac_right_inv"),
+        ]
+        if is_se(G):
+            Rot = {SE2: SO2, SE3: SO3}[G]
+            R = Rot(np.eye(1, Rot.parameters_dim)[0])
+            cases += [
+                (f"{g}.from_translation", G.from_translation, (d + 1,), (d,), "from_translation"),
+                (
+                    f"{g}.from_rotation_and_translation",
+                    lambda t, G=G, R=R: G.from_rotation_and_translation(R, t),
+                    (3, d + 1),
+                    (d,),
+                    "from_rotation_and_translation",
+                ),
+            ]
+    cases += [
+        ("SO3.from_quaternion_xyzw-3", SO3.from_quaternion_xyzw, (3,), (4,), "from_quaternion_xyzw"),
+        (
+            "SO3.from_quaternion_xyzw-batched",
+            SO3.from_quaternion_xyzw,
+            (2, 5),
+            (4,),
+            "from_quaternion_xyzw",
+        ),
+    ]
+    return cases
+
+
+_CASES = _shape_cases()
+
+
+def _check_message(msg, bad, trailing, name):
+    assert re.search(r"\b" + re.escape(name) + r"\b", msg), f"{name!r} not named in: {msg}"
+    assert str(tuple(bad)) in msg, f"received shape {tuple(bad)} not in: {msg}"
+    expected = ", ".join(map(str, trailing)) + ")"
+    assert expected in msg, f"expected trailing shape {trailing} not in: {msg}"
+
+
+@pytest.mark.parametrize(("fn", "bad", "trailing", "name"), [c[1:] for c in _CASES],
+                         ids=[c[0] for c in _CASES])
+def test_wrong_trailing_shape_raises_value_error(fn, bad, trailing, name):
+    with pytest.raises(ValueError) as info:
+        fn(np.zeros(bad))
+    _check_message(str(info.value), bad, trailing, name)
+
+
+@pytest.mark.parametrize(("fn", "bad", "trailing", "name"), [c[1:] for c in _CASES],
+                         ids=[c[0] for c in _CASES])
+def test_wrong_trailing_shape_raises_at_trace_time(fn, bad, trailing, name):
+    """The same error comes out of abstract evaluation (no computation runs) and under jit,
+    as a ValueError, not as a runtime failure."""
+    spec = jax.ShapeDtypeStruct(bad, jnp.float32)
+    with pytest.raises(ValueError) as info:
+        jax.eval_shape(fn, spec)
+    _check_message(str(info.value), bad, trailing, name)
+    with pytest.raises(ValueError) as info:
+        jax.jit(lambda a: fn(a))(np.zeros(bad, np.float32))
+    _check_message(str(info.value), bad, trailing, name)
+
+
+@over_groups
+def test_constructor_does_not_validate(G):
+    # JAX rebuilds pytrees with arbitrary leaves (shapes, axis specs, tracers, None).
+    for leaf in (np.zeros(G.parameters_dim + 3), 0, None, (2, 3), jax.ShapeDtypeStruct((1,), jnp.float32)):
+        G(leaf)
+
+
+@over_groups
+def test_wrong_shapes_inside_manifold_and_geodesic(G):
+    T = random_element(G, 0, (3,), jnp.float64)
+    with pytest.raises(ValueError, match=re.escape(f"{G.tangent_dim})")):
+        jaxlie_geo.manifold.rplus(T, np.zeros((3, G.tangent_dim + 1)))
+    # incompatible batch shapes (numpy broadcasting rules) fail at trace time; the contract
+    # does not fix the exception type (JAX's own broadcasting raises TypeError).
+    U = random_element(G, 1, (4,), jnp.float64)
+    for bad in (
+        lambda: T @ U,
+        lambda: T.interpolate(T, np.zeros(4)),
+        lambda: T.apply(np.zeros((4, G.space_dim))),
+        lambda: jax.eval_shape(lambda T, U: T @ U, T, U),
+    ):
+        with pytest.raises((ValueError, TypeError), match="(?i)shape"):
+            bad()
+
+
+@over_groups
+def test_mixing_groups_raises_type_error(G):
+    other = SE3 if G is not SE3 else SO3
+    T = G.identity()
+    U = other.identity()
+    with pytest.raises(TypeError):
+        T @ U
+    with pytest.raises(TypeError):
+        jaxlie_geo.geodesic(T, U)
+    with pytest.raises(TypeError):
+        jaxlie_geo.stack([T, U])
+    with pytest.raises(ValueError):
+        jaxlie_geo.stack([])
+
+
+@pytest.mark.parametrize("G", [SE2, SE3], ids=lambda G: G.__name__)
+def test_from_rotation_and_translation_checks_rotation_type(G):
+    wrong = SO3.identity() if G is SE2 else SO2.identity()
+    with pytest.raises(TypeError, match="rotation"):
+        G.from_rotation_and_translation(wrong, np.zeros(G.space_dim))
+
+
+@over_groups
+def test_non_float_dtypes_rejected(G):
+    with pytest.raises(ValueError, match="dtype"):
+        G.identity(dtype=jnp.int32)
+    with pytest.raises(ValueError, match="dtype"):
+        G.sample_uniform(jax.random.PRNGKey(0), dtype=jnp.int32)
+    with pytest.raises(ValueError, match="real"):
+        G.exp(np.zeros(G.tangent_dim, np.complex64))
+
+
+def test_from_xy_theta_incompatible_shapes():
+    with pytest.raises(ValueError):
+        SE2.from_xy_theta(np.zeros(2), np.zeros(3), 0.0)
