@@ -5,6 +5,7 @@ closed-form vector kernels, ``hat``/``vee``, geodesics and batch indexing.
 """
 
 from . import hints as hints
+from . import interop as interop
 from . import jacobians as jacobians
 from . import manifold as manifold
 from . import motion as motion

@@ -1,0 +1,61 @@
+"""jaxlie_geo.interop: our elements handed to jaxlie 1.5 and back, unchanged."""
+
+from __future__ import annotations
+
+import jaxlie
+import numpy as np
+from conftest import GROUPS, over_groups_dtypes, random_element, random_points, to_np
+
+import jax
+import jax.numpy as jnp
+import jaxlie_geo
+from jaxlie_geo.interop import from_jaxlie, to_jaxlie
+
+
+@over_groups_dtypes
+def test_round_trip_keeps_parameters_bit_for_bit(G, dtype):
+    T = random_element(G, 3, (2, 3), dtype)
+    J = to_jaxlie(T)
+    assert type(J) is getattr(jaxlie, G.__name__)
+    assert J.get_batch_axes() == (2, 3)
+    np.testing.assert_array_equal(to_np(J.parameters()), to_np(T.parameters()))
+    back = from_jaxlie(J)
+    assert type(back) is G
+    np.testing.assert_array_equal(to_np(back.parameters()), to_np(T.parameters()))
+    assert back.parameters().dtype == dtype
+
+
+@over_groups_dtypes
+def test_jaxlie_computes_the_same_transform(G, dtype):
+    """A library that only knows jaxlie acts with our pose as we do."""
+    T = random_element(G, 5, (4,), dtype)
+    p = random_points(G, 5, (4,), dtype)
+    tol = 1e-5 if dtype == jnp.float32 else 1e-12
+    np.testing.assert_allclose(to_np(to_jaxlie(T) @ p), to_np(T @ p), rtol=tol, atol=tol)
+    np.testing.assert_allclose(
+        to_np(to_jaxlie(T).as_matrix()), to_np(T.as_matrix()), rtol=tol, atol=tol
+    )
+
+
+def test_pytrees_and_jit():
+    tree = {
+        "poses": [random_element(G, i, (2,), jnp.float64) for i, G in enumerate(GROUPS)],
+        "weight": jnp.arange(3.0),
+        "name_free": (1.5, None),
+    }
+    converted = jax.jit(to_jaxlie)(tree)
+    for ours, theirs in zip(tree["poses"], converted["poses"]):
+        assert isinstance(theirs, jaxlie.MatrixLieGroup)
+        assert type(theirs).__name__ == type(ours).__name__
+    np.testing.assert_array_equal(to_np(converted["weight"]), to_np(tree["weight"]))
+    assert converted["name_free"] == (1.5, None)
+    back = jax.jit(from_jaxlie)(converted)
+    for ours, again in zip(tree["poses"], back["poses"]):
+        assert type(again) is type(ours)
+        np.testing.assert_array_equal(to_np(again.parameters()), to_np(ours.parameters()))
+
+
+def test_elements_of_neither_library_pass_through():
+    assert to_jaxlie(jnp.ones(3)).shape == (3,)
+    assert from_jaxlie(jaxlie_geo.SO3.identity()).wxyz.shape == (4,)  # ours stay ours
+    assert isinstance(to_jaxlie(jaxlie.SO3.identity()), jaxlie.SO3)  # theirs stay theirs
