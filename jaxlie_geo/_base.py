@@ -102,7 +102,9 @@ def pytree_dataclass(cls: _C) -> _C:
     SE2's. ``tests/test_transforms.py`` checks that no two of our pytree classes (and no
     user dataclass of the same layout) share a structure.
     """
-    cls = dataclasses.dataclass(frozen=True, eq=False)(cls)  # type: ignore[assignment]
+    # Group elements keep MatrixLieGroup.__repr__ (rounded values, no dtype noise).
+    own_repr = not issubclass(cls, MatrixLieGroup)
+    cls = dataclasses.dataclass(frozen=True, eq=False, repr=own_repr)(cls)  # type: ignore[assignment]
     names = tuple(f.name for f in dataclasses.fields(cls))
     keys = tuple(jax.tree_util.GetAttrKey(n) for n in names)
 

@@ -669,3 +669,18 @@ def test_integer_factories():
     Q = SO3.from_quaternion_xyzw(np.array([0, 0, 0, 1]))
     assert jnp.issubdtype(Q.parameters().dtype, jnp.floating)
     np.testing.assert_array_equal(to_np(Q.wxyz), [1.0, 0.0, 0.0, 0.0])
+
+
+# ---------------------------------------------------------------------------------
+# repr.
+
+
+@over_groups
+def test_repr_names_the_field_and_rounds_the_values(G):
+    T = G.identity(dtype=jnp.float64)
+    field = {SO2: "unit_complex", SE2: "unit_complex_xy", SO3: "wxyz", SE3: "wxyz_xyz"}[G]
+    text = repr(T)
+    assert text.startswith(f"{G.__name__}({field}=[1. 0.")
+    assert "Array(" not in text and "dtype" not in text
+    traced = jax.jit(lambda T: (repr(T), T)[1])  # repr of a traced element does not fail
+    traced(T)
