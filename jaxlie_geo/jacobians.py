@@ -28,10 +28,11 @@ of ``hat(eᵢ) p̃`` (p̃ = (p, 1) for SE groups), e.g. [I, −p̂] for SE(3), �
 
 from __future__ import annotations
 
-from typing import Tuple, TypeVar
+from typing import Sequence, Tuple, TypeVar
 
 import jax
 import jax.numpy as jnp
+import numpy as onp
 
 from . import hints
 from ._base import MatrixLieGroup, SEBase
@@ -96,14 +97,53 @@ def log(a: MatrixLieGroup) -> jax.Array:
     return a.jlog()
 
 
+def _generators(G: type) -> onp.ndarray:
+    """The generators hat(eᵢ) as a NumPy constant ``(k, n, n)`` (entries 0 and ±1)."""
+    with jax.ensure_compile_time_eval():
+        return onp.asarray(G.hat(onp.eye(G.tangent_dim)))
+
+
+def _combine(coeffs: onp.ndarray, xs: Sequence[jax.Array]) -> jax.Array:
+    """Σ_l coeffs[l] · xs[l] for a constant coefficient vector, skipping zeros."""
+    terms = [c * x for c, x in zip(coeffs.tolist(), xs) if c != 0.0]
+    if not terms:
+        return jnp.zeros_like(xs[0])
+    out = terms[0]
+    for t in terms[1:]:
+        out = out + t
+    return out
+
+
+def _matmul(A: jax.Array, B: jax.Array) -> jax.Array:
+    """(..., m, n) @ (..., n, k) for small m, n, k, written out elementwise: a batched
+    3×3 ``dot`` on XLA:CPU costs several times the fused multiply-adds."""
+    n = A.shape[-1]
+    rows = []
+    for i in range(A.shape[-2]):
+        row = []
+        for j in range(B.shape[-1]):
+            acc = A[..., i, 0] * B[..., 0, j]
+            for m in range(1, n):
+                acc = acc + A[..., i, m] * B[..., m, j]
+            row.append(acc)
+        rows.append(jnp.stack(row, axis=-1))
+    return jnp.stack(rows, axis=-2)
+
+
 def generator_action(G: type, points: hints.Array) -> jax.Array:
-    """K(p): ``d (hat(δ) p̃)[:space_dim] / dδ``, shape ``(*batch, space_dim, tangent_dim)``."""
-    n, k, d = G.matrix_dim, G.tangent_dim, G.space_dim
+    """K(p): ``d (hat(δ) p̃)[:space_dim] / dδ``, shape ``(*batch, space_dim, tangent_dim)``
+    (p̃ = (p, 1) for SE groups): e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3). Entry (i, j)
+    is Σ_l hat(e_j)[i, l] p̃_l, written out from the constant generators."""
+    n, d = G.matrix_dim, G.space_dim
     p = jnp.asarray(points)
-    E = G.hat(jnp.eye(k, dtype=p.dtype))  # (k, n, n): the generators, entries 0 and ±1
+    coords = [p[..., l] for l in range(d)]
     if n > d:  # homogeneous coordinates
-        p = jnp.concatenate([p, jnp.ones((*p.shape[:-1], 1), p.dtype)], axis=-1)
-    return jnp.einsum("kij,...j->...ik", E[:, :d, :], p)
+        coords.append(jnp.ones_like(coords[0]))
+    E = _generators(G)
+    return jnp.stack(
+        [jnp.stack([_combine(E[j, i], coords) for j in range(G.tangent_dim)], -1) for i in range(d)],
+        axis=-2,
+    )
 
 
 def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
@@ -113,12 +153,10 @@ def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
     p = T._check_points(points)
     R = T.rotation().as_matrix() if isinstance(T, SEBase) else T.as_matrix()
     R = R.astype(jnp.result_type(R, p))
-    J_T = R @ generator_action(type(T), p.astype(R.dtype))
     batch = jnp.broadcast_shapes(R.shape[:-2], p.shape[:-1])
-    return (
-        jnp.broadcast_to(J_T, (*batch, *J_T.shape[-2:])),
-        jnp.broadcast_to(R, (*batch, *R.shape[-2:])),
-    )
+    R = jnp.broadcast_to(R, (*batch, *R.shape[-2:]))
+    K = generator_action(type(T), jnp.broadcast_to(p.astype(R.dtype), (*batch, p.shape[-1])))
+    return _matmul(R, K), R
 
 
 __all__ = ["compose", "inverse", "apply", "between", "rminus", "rplus", "exp", "log", "generator_action"]

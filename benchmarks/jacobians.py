@@ -1,0 +1,538 @@
+#!/usr/bin/env python
+"""Speed benchmark: jaxlie_geo's closed-form Jacobians against ``jax.jacfwd``.
+
+For every group (SO2, SE2, SO3, SE3) and every analytical Jacobian that is not constant,
+the closed form is timed against ``jax.vmap(jax.jacfwd(map))`` of the map it is the
+Jacobian of, both under ``jax.jit`` on the same random inputs (batch 10^5 by default,
+float32 by default). Conventions are those of ``jaxlie_geo/jacobians.py``: right
+perturbations ``X ⊕ δ = X exp(δ)``, ``J = d log(f(X)⁻¹ f(X ⊕ δ)) / dδ`` at δ = 0 for
+group-valued f, ``d f(X ⊕ δ) / dδ`` for vector-valued f (points and tangents are
+perturbed additively). The maps differentiated (all at δ = 0):
+
+  G.jac_right(x)            δ ↦ log(exp(x)⁻¹ exp(x + δ))
+  G.jac_left(x)             δ ↦ log(exp(x + δ) exp(x)⁻¹)
+  G.jac_right_inv(x)        δ ↦ log(exp(x) exp(δ))
+  G.jac_left_inv(x)         δ ↦ log(exp(δ) exp(x))
+  T.jlog()                  δ ↦ log(T exp(δ))
+  jacobians.compose(a, b)   (δa, δb) ↦ log((a b)⁻¹ (a exp δa)(b exp δb))
+  jacobians.inverse(a)      δ ↦ log(a (a exp δ)⁻¹)
+  jacobians.between(a, b)   (δa, δb) ↦ log((a⁻¹ b)⁻¹ (a exp δa)⁻¹ (b exp δb))
+  jacobians.rminus(a, b)    (δa, δb) ↦ log((a exp δa)⁻¹ (b exp δb))
+  jacobians.rplus(a, x)     (δa, δx) ↦ log((a exp x)⁻¹ (a exp δa) exp(x + δx))
+  jacobians.apply(T, p)     (δT, δp) ↦ (T exp δT)(p + δp)
+
+(``jacobians.exp(G, x)`` and ``jacobians.log(T)`` are ``G.jac_right(x)`` and ``T.jlog()``.)
+A case is skipped when our Jacobian does not depend on its inputs (e.g. everything of SO2
+except apply, where Ad = 1 and J_r = 1); ``SEn.adjoint()`` is not the Jacobian of a map and
+is not timed (it appears inside compose / inverse / between / rplus).
+
+Inputs: tangents have normally distributed translations and rotation angles uniform in
+(0, 3) rad about random axes; elements come from ``G.sample_uniform``; points are standard
+normal. Before timing, every case is checked: the closed form and jacfwd are evaluated in
+float64 on the same inputs and the max absolute difference is reported (column
+``max |diff|``; > 1e-9 is flagged).
+
+Timing is that of ``benchmarks/run.py`` (imported from it): the two jit-compiled
+functions are run in interleaved repetitions (A B, B A, ...), the time per element is the
+median over repetitions divided by N, and the ratio jacfwd / ours (> 1: the closed form is
+faster) is the median of the paired per-repetition ratios, with their inter-quartile
+range as a noise gauge. Compile time (trace + lower + compile) is measured separately.
+
+Usage:
+  python benchmarks/jacobians.py                    # float32, N = 10^5, all groups
+  python benchmarks/jacobians.py --dtype float64    # float64 (enables jax x64)
+  python benchmarks/jacobians.py --quick            # smoke test: N = 10^3, 3 repeats
+  python benchmarks/jacobians.py --groups SE3 --cases jac_right_inv,rminus --sizes 1000,100000
+  python benchmarks/jacobians.py --markdown --json out.json
+
+JAX_PLATFORMS is respected (e.g. JAX_PLATFORMS=cuda to run on a GPU). On a 2-core CPU a
+default run takes ~4-6 min and --quick ~2-5 min: most of it is XLA compilation (each case
+compiles both sides in the timed dtype, and again in float64 for the check unless
+--dtype float64), and jacfwd of the SE3 maps costs up to ~2 s per call at N = 10^5.
+Repetitions: automatic within ~1 s per case, at least 5 (--quick: 3).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import run as _run  # noqa: E402  (benchmarks/run.py: timing helpers; also puts the repo root on sys.path)
+
+GROUPS = _run.GROUPS
+GROUP_INFO = _run.GROUP_INFO
+TOL = 1e-9  # float64 agreement threshold
+
+# name -> (label of our function, map differentiated by jacfwd, input kinds)
+CASES = {
+    "jac_right": ("G.jac_right(x)", "δ ↦ log(exp(x)⁻¹ exp(x+δ))", ("tangent",)),
+    "jac_left": ("G.jac_left(x)", "δ ↦ log(exp(x+δ) exp(x)⁻¹)", ("tangent",)),
+    "jac_right_inv": ("G.jac_right_inv(x)", "δ ↦ log(exp(x) exp(δ))", ("tangent",)),
+    "jac_left_inv": ("G.jac_left_inv(x)", "δ ↦ log(exp(δ) exp(x))", ("tangent",)),
+    "jlog": ("T.jlog()", "δ ↦ log(T exp(δ))", ("element",)),
+    "compose": ("jacobians.compose(a, b)", "(δa, δb) ↦ log((ab)⁻¹ (a exp δa)(b exp δb))",
+                ("element", "element")),
+    "inverse": ("jacobians.inverse(a)", "δ ↦ log(a (a exp δ)⁻¹)", ("element",)),
+    "between": ("jacobians.between(a, b)", "(δa, δb) ↦ log((a⁻¹b)⁻¹ (a exp δa)⁻¹ (b exp δb))",
+                ("element", "element")),
+    "rminus": ("jacobians.rminus(a, b)", "(δa, δb) ↦ log((a exp δa)⁻¹ (b exp δb))",
+               ("element", "element")),
+    "rplus": ("jacobians.rplus(a, x)", "(δa, δx) ↦ log((a exp x)⁻¹ (a exp δa) exp(x+δx))",
+              ("element", "tangent")),
+    "apply": ("jacobians.apply(T, p)", "(δT, δp) ↦ (T exp δT)(p + δp)", ("element", "point")),
+}
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(
+        description="Benchmark jaxlie_geo's closed-form Jacobians against jax.jacfwd (jit, interleaved).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--sizes", default=None, help="comma-separated batch sizes (default 100000; --quick: 1000)")
+    p.add_argument("--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3")
+    p.add_argument("--cases", default=",".join(CASES), help="comma-separated subset of " + ",".join(CASES))
+    p.add_argument("--repeats", type=int, default=None,
+                   help="interleaved repetitions per case; default: automatic, 7..25 within a time "
+                        "budget per case (--quick: 3)")
+    p.add_argument("--dtype", choices=("float32", "float64"), default="float32",
+                   help="dtype of the timed runs (the agreement check is always float64)")
+    p.add_argument("--quick", action="store_true", help="small size and few repeats (smoke test)")
+    p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
+    p.add_argument("--json", default=None, metavar="PATH", help="also write raw results as JSON")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
+    if args.sizes is None:
+        args.sizes = "1000" if args.quick else "100000"
+    args.sizes = [int(float(s)) for s in args.sizes.split(",") if s.strip()]
+    args.groups = [g.strip().upper() for g in args.groups.split(",") if g.strip()]
+    args.cases = [c.strip() for c in args.cases.split(",") if c.strip()]
+    for g in args.groups:
+        if g not in GROUPS:
+            p.error(f"unknown group {g!r}; choose from {GROUPS}")
+    for c in args.cases:
+        if c not in CASES:
+            p.error(f"unknown case {c!r}; choose from {tuple(CASES)}")
+    if any(n < 1 for n in args.sizes):
+        p.error("sizes must be >= 1")
+    args.candidate = "jaxlie_geo"  # for run.machine_info
+    return args
+
+
+# --------------------------------------------------------------------------------------
+# The two sides of every case. Both map raw arrays -> a pytree of arrays; elements are
+# rebuilt inside the trace. Fresh closures per call, so that compile times are not cached.
+# --------------------------------------------------------------------------------------
+
+
+def make_ours(lib, group: str, case: str):
+    G = getattr(lib, group)
+    J = lib.jacobians
+    return {
+        "jac_right": lambda x: G.jac_right(x),
+        "jac_left": lambda x: G.jac_left(x),
+        "jac_right_inv": lambda x: G.jac_right_inv(x),
+        "jac_left_inv": lambda x: G.jac_left_inv(x),
+        "jlog": lambda pt: G(pt).jlog(),
+        "compose": lambda pa, pb: J.compose(G(pa), G(pb)),
+        "inverse": lambda pa: J.inverse(G(pa)),
+        "between": lambda pa, pb: J.between(G(pa), G(pb)),
+        "rminus": lambda pa, pb: J.rminus(G(pa), G(pb)),
+        "rplus": lambda pa, x: J.rplus(G(pa), x),
+        "apply": lambda pt, p: J.apply(G(pt), p),
+    }[case]
+
+
+def make_autodiff(lib, group: str, case: str):
+    """vmap over the batch of jacfwd (at 0) of the map the case's Jacobian differentiates."""
+    import jax
+    import jax.numpy as jnp
+
+    G = getattr(lib, group)
+    k = G.tangent_dim
+    E = G.exp
+
+    def at0(f, argnums=0):
+        def jac(*inputs):
+            zeros = lambda: jnp.zeros((k,), inputs[0].dtype)  # noqa: E731
+            if argnums == 0:
+                return jax.jacfwd(lambda d: f(d, *inputs))(zeros())
+            return jax.jacfwd(lambda d1, d2: f(d1, d2, *inputs), argnums=(0, 1))(zeros(), zeros())
+
+        return jax.vmap(jac)
+
+    if case == "jac_right":
+        return at0(lambda d, x: (E(x).inverse() @ E(x + d)).log())
+    if case == "jac_left":
+        return at0(lambda d, x: (E(x + d) @ E(x).inverse()).log())
+    if case == "jac_right_inv":
+        return at0(lambda d, x: (E(x) @ E(d)).log())
+    if case == "jac_left_inv":
+        return at0(lambda d, x: (E(d) @ E(x)).log())
+    if case == "jlog":
+        return at0(lambda d, pt: (G(pt) @ E(d)).log())
+    if case == "compose":
+        def f(da, db, pa, pb):
+            a, b = G(pa), G(pb)
+            return ((a @ b).inverse() @ ((a @ E(da)) @ (b @ E(db)))).log()
+        return at0(f, argnums=(0, 1))
+    if case == "inverse":
+        def f(d, pa):
+            a = G(pa)
+            return (a @ (a @ E(d)).inverse()).log()
+        return at0(f)
+    if case == "between":
+        def f(da, db, pa, pb):
+            a, b = G(pa), G(pb)
+            return ((a.inverse() @ b).inverse() @ ((a @ E(da)).inverse() @ (b @ E(db)))).log()
+        return at0(f, argnums=(0, 1))
+    if case == "rminus":
+        def f(da, db, pa, pb):
+            a, b = G(pa), G(pb)
+            return ((a @ E(da)).inverse() @ (b @ E(db))).log()
+        return at0(f, argnums=(0, 1))
+    if case == "rplus":
+        def f(da, dx, pa, x):
+            a = G(pa)
+            return ((a @ E(x)).inverse() @ ((a @ E(da)) @ E(x + dx))).log()
+        return at0(f, argnums=(0, 1))
+    if case == "apply":
+        def jac(pt, p):
+            T = G(pt)
+            return jax.jacfwd(lambda dT, dp: (T @ E(dT)) @ (p + dp), argnums=(0, 1))(
+                jnp.zeros((k,), pt.dtype), jnp.zeros_like(p))
+        return jax.vmap(jac)
+    raise ValueError(case)
+
+
+# --------------------------------------------------------------------------------------
+# Inputs (float64 numpy; cast to the timed dtype later)
+# --------------------------------------------------------------------------------------
+
+
+def make_inputs(lib, group: str, case: str, n: int, seed: int):
+    """float64 numpy inputs; needs jax_enable_x64 on (for sample_uniform in float64)."""
+    import numpy as np
+    import jax
+    import jax.numpy as jnp
+
+    G = getattr(lib, group)
+    info = GROUP_INFO[group]
+    ids = [seed, GROUPS.index(group), list(CASES).index(case), n]
+    rng = np.random.default_rng(ids)
+    key = jax.random.PRNGKey(int(rng.integers(0, 2**31 - 1)))
+    out = []
+    for kind in CASES[case][2]:
+        if kind == "tangent":
+            xi = rng.normal(size=(n, info["tangent_dim"]))
+            rot = xi[:, info["rot"]]
+            norm = np.linalg.norm(rot, axis=-1, keepdims=True)
+            if rot.shape[-1] == 1:  # SO2 / SE2: signed angle
+                ang = rng.uniform(-3.0, 3.0, size=(n, 1))
+                xi[:, info["rot"]] = ang
+            else:
+                ang = rng.uniform(0.0, 3.0, size=(n, 1))
+                xi[:, info["rot"]] = rot / np.maximum(norm, 1e-12) * ang
+            out.append(xi)
+        elif kind == "element":
+            key, sub = jax.random.split(key)
+            out.append(np.asarray(G.sample_uniform(sub, (n,), dtype=jnp.float64).parameters(), np.float64))
+        elif kind == "point":
+            out.append(rng.normal(size=(n, info["space_dim"])))
+        else:
+            raise ValueError(kind)
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------------------
+# Check / constant detection (float64)
+# --------------------------------------------------------------------------------------
+
+
+def leaves64(tree):
+    import numpy as np
+    import jax
+
+    return [np.asarray(x, dtype=np.float64) for x in jax.tree_util.tree_leaves(tree)]
+
+
+def max_abs_diff(a, b) -> float:
+    import numpy as np
+
+    la, lb = leaves64(a), leaves64(b)
+    if len(la) != len(lb):
+        return float("inf")
+    worst = 0.0
+    for x, y in zip(la, lb):
+        if x.shape != y.shape:
+            return float("inf")
+        if x.size:
+            d = np.abs(x - y)
+            worst = max(worst, float(np.max(np.where(np.isnan(d), np.inf, d))))
+    return worst
+
+
+def is_constant(lib, group: str, case: str, seed: int) -> bool:
+    """True if our Jacobian is the same for all of a few random inputs (e.g. SO2's J_r = 1)."""
+    import numpy as np
+    import jax
+    import jax.numpy as jnp
+
+    inputs = [jnp.asarray(x) for x in make_inputs(lib, group, case, 16, seed + 12345)]
+    out = leaves64(jax.jit(make_ours(lib, group, case))(*inputs))
+    return all(np.array_equal(x, np.broadcast_to(x[:1], x.shape)) for x in out)
+
+
+def check(lib, group: str, case: str, inputs64) -> float:
+    """Max |ours - jacfwd| in float64 on the given inputs."""
+    import jax
+    import jax.numpy as jnp
+
+    inputs = [jnp.asarray(x, dtype=jnp.float64) for x in inputs64]
+    ours = jax.jit(make_ours(lib, group, case))(*inputs)
+    ad = jax.jit(make_autodiff(lib, group, case))(*inputs)
+    return max_abs_diff(ours, ad)
+
+
+# --------------------------------------------------------------------------------------
+# Main benchmark
+# --------------------------------------------------------------------------------------
+
+
+def set_x64(jax, on: bool):
+    jax.config.update("jax_enable_x64", bool(on))
+
+
+def bench_case(lib, group, case, n, args, index):
+    import jax
+    import jax.numpy as jnp
+
+    # Inputs and the agreement check, in float64.
+    set_x64(jax, True)
+    inputs64 = make_inputs(lib, group, case, n, args.seed)
+
+    # Timing, in the requested dtype (x64 only on for float64).
+    set_x64(jax, args.dtype == "float64")
+    dtype = jnp.float64 if args.dtype == "float64" else jnp.float32
+    inputs = tuple(jnp.asarray(x.astype(dtype)) for x in inputs64)
+    f_ours = make_ours(lib, group, case)
+    f_ad = make_autodiff(lib, group, case)
+    # Alternate compile order between cases so neither side systematically goes first.
+    if index % 2 == 0:
+        c_ours, comp_ours = _run.compile_fn(f_ours, inputs)
+        c_ad, comp_ad = _run.compile_fn(f_ad, inputs)
+    else:
+        c_ad, comp_ad = _run.compile_fn(f_ad, inputs)
+        c_ours, comp_ours = _run.compile_fn(f_ours, inputs)
+    out_ours = jax.block_until_ready(c_ours(*inputs))  # warm-up execution
+    out_ad = jax.block_until_ready(c_ad(*inputs))
+    dtypes = {str(x.dtype) for x in jax.tree_util.tree_leaves(out_ours)}
+    diff_timed = max_abs_diff(out_ours, out_ad)
+    del out_ours, out_ad
+
+    target_s = 0.002 if args.quick else 0.01
+    budget_s = 0.1 if args.quick else 1.0
+    repeats = 3 if (args.quick and args.repeats is None) else args.repeats
+    t_ours, t_ad = _run.interleaved(c_ours, c_ad, inputs, repeats, target_s, budget_s,
+                                    min_repeats=3 if args.quick else 5)
+    del c_ours, c_ad, inputs
+
+    if args.dtype == "float64":
+        diff = diff_timed  # the timed functions already ran in float64 on these inputs
+    else:
+        set_x64(jax, True)
+        diff = check(lib, group, case, inputs64)
+        set_x64(jax, False)
+
+    med_ours, med_ad = statistics.median(t_ours), statistics.median(t_ad)
+    paired = [b / a for a, b in zip(t_ours, t_ad)]
+    q1, q3 = _run.quantiles(paired)
+    label, mapping, _ = CASES[case]
+    return {
+        "group": group, "case": case, "jacobian": label, "map": mapping, "n": n, "dtype": args.dtype,
+        "ours_ns_per_elem": med_ours * 1e9 / n,
+        "jacfwd_ns_per_elem": med_ad * 1e9 / n,
+        "ratio": statistics.median(paired),
+        "ratio_of_medians": med_ad / med_ours,
+        "ratio_q1": q1, "ratio_q3": q3,
+        "compile_ours_ms": comp_ours * 1e3,
+        "compile_jacfwd_ms": comp_ad * 1e3,
+        "repeats": len(t_ours),
+        "max_abs_diff_float64": diff,
+        "max_abs_diff_timed_dtype": diff_timed,
+        "output_dtypes": sorted(dtypes),
+    }
+
+
+def global_warmup(lib, dtype):
+    """Pay one-time process costs (backend init, first compile) before measuring anything."""
+    import jax
+    import jax.numpy as jnp
+
+    for g in GROUPS:
+        G = getattr(lib, g)
+        x = jnp.zeros((1, G.tangent_dim), dtype=dtype)
+        jax.block_until_ready(jax.jit(lambda x, G=G: G.jac_right(x))(x))
+        jax.block_until_ready(jax.jit(jax.vmap(jax.jacfwd(lambda x, G=G: G.exp(x).log())))(x))
+
+
+# --------------------------------------------------------------------------------------
+# Reporting
+# --------------------------------------------------------------------------------------
+
+HEADER = ["group", "Jacobian", "map differentiated by jacfwd (at δ = 0)", "N", "ours ns/elem",
+          "jacfwd ns/elem", "ratio (jacfwd/ours)", "ratio IQR", "max |diff|", "compile ms ours",
+          "compile ms jacfwd"]
+N_LEFT = 3  # left-aligned text columns
+
+
+def fmt_ns(x: float) -> str:
+    # Plain ns per element, 3 significant digits (the unit is in the column header).
+    if x >= 100:
+        return f"{x:.0f}"
+    if x >= 10:
+        return f"{x:.1f}"
+    return f"{x:.2f}"
+
+
+def table_rows(results, markdown):
+    rows = []
+    for r in results:
+        code = (lambda s: f"`{s}`") if markdown else (lambda s: s)
+        rows.append([
+            r["group"], code(r["jacobian"]), code(r["map"]), _run.fmt_n(r["n"]),
+            fmt_ns(r["ours_ns_per_elem"]), fmt_ns(r["jacfwd_ns_per_elem"]),
+            f"{r['ratio']:.2f}", f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
+            f"{r['max_abs_diff_float64']:.1e}",
+            f"{r['compile_ours_ms']:.0f}", f"{r['compile_jacfwd_ms']:.0f}",
+        ])
+    return rows
+
+
+def render(header, rows, markdown: bool, n_left: int = N_LEFT) -> str:
+    if markdown:
+        esc = lambda c: c.replace("|", "\\|")  # noqa: E731  ("max |diff|")
+        header, rows = [esc(h) for h in header], [[esc(c) for c in r] for r in rows]
+        out = ["| " + " | ".join(header) + " |",
+               "|" + "|".join("---" if i < n_left else "--:" for i in range(len(header))) + "|"]
+        return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    line = lambda cells: "  ".join(c.ljust(w) if i < n_left else c.rjust(w)  # noqa: E731
+                                   for i, (c, w) in enumerate(zip(cells, widths)))
+    return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
+
+
+def summary(results, skipped, markdown) -> str:
+    bullet = "- " if markdown else "  "
+    lines = []
+    groups = [g for g in GROUPS if any(r["group"] == g for r in results)]
+    if results:
+        parts = [f"{g} {_run.geomean([r['ratio'] for r in results if r['group'] == g]):.2f}" for g in groups]
+        lines.append("Geometric-mean ratio jacfwd/ours (>1: closed form faster): "
+                     + ", ".join(parts) + f"; overall {_run.geomean([r['ratio'] for r in results]):.2f}.")
+    slow = [r for r in results if r["ratio"] < 0.5]
+    lines.append("")
+    if slow:
+        lines.append("Closed forms slower than 2x jacfwd (ratio < 0.5):")
+        for r in sorted(slow, key=lambda r: r["ratio"]):
+            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={_run.fmt_n(r['n'])}: ratio {r['ratio']:.2f} "
+                         f"({fmt_ns(r['ours_ns_per_elem'])} vs {fmt_ns(r['jacfwd_ns_per_elem'])} ns/elem)")
+    else:
+        lines.append("No closed form is slower than 2x jacfwd (ratio < 0.5).")
+    slower = [r for r in results if 0.5 <= r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
+    if slower:
+        lines.append("Closed forms slower than jacfwd (ratio < 0.95, whole paired-ratio IQR below 1):")
+        for r in sorted(slower, key=lambda r: r["ratio"]):
+            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={_run.fmt_n(r['n'])}: ratio {r['ratio']:.2f}")
+    bad = [r for r in results if not (r["max_abs_diff_float64"] <= TOL)]
+    lines.append("")
+    if bad:
+        lines.append(f"DISAGREEMENT: closed form and jacfwd differ by more than {TOL:g} (float64):")
+        for r in bad:
+            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={_run.fmt_n(r['n'])}: "
+                         f"max |diff| = {r['max_abs_diff_float64']:.3g}")
+    else:
+        lines.append(f"All closed forms agree with jacfwd to {TOL:g} (float64 check, max abs difference).")
+    wrong_dtype = [r for r in results if r["output_dtypes"] != [r["dtype"]]]
+    if wrong_dtype:
+        lines.append("Output dtype differs from the input dtype: "
+                     + ", ".join(f"{r['group']} {r['case']} {r['output_dtypes']}" for r in wrong_dtype))
+    if skipped:
+        lines.append("")
+        lines.append("Skipped (constant Jacobian, independent of the inputs): "
+                     + ", ".join(f"{g} {CASES[c][0]}" for g, c in skipped) + ".")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+
+    import jax
+
+    set_x64(jax, args.dtype == "float64")
+    import jax.numpy as jnp
+
+    lib = importlib.import_module("jaxlie_geo")
+    info = _run.machine_info(args, jax)
+    info.pop("candidate", None)
+    info.pop("jaxlie", None)
+    info["jaxlie_geo_file"] = os.path.dirname(lib.__file__)
+    info["command"] = " ".join(["python", "benchmarks/jacobians.py", *sys.argv[1:]])
+    print("# jaxlie_geo closed-form Jacobians vs jax.jacfwd")
+    for k, v in info.items():
+        print(f"  {k:16s} {v}")
+    print(flush=True)
+
+    t_start = time.perf_counter()
+    global_warmup(lib, jnp.float64 if args.dtype == "float64" else jnp.float32)
+
+    results, skipped = [], []
+    index = 0
+    for group in args.groups:
+        for case in args.cases:
+            set_x64(jax, True)
+            constant = is_constant(lib, group, case, args.seed)
+            set_x64(jax, args.dtype == "float64")
+            if constant:
+                skipped.append((group, case))
+                print(f"{group:4s} {case:14s} skipped (constant)", flush=True)
+                continue
+            for n in args.sizes:
+                r = bench_case(lib, group, case, n, args, index)
+                index += 1
+                results.append(r)
+                print(f"{group:4s} {case:14s} N={_run.fmt_n(n):>6s}  ours {fmt_ns(r['ours_ns_per_elem']):>7s} ns/el  "
+                      f"jacfwd {fmt_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  ratio {r['ratio']:5.2f} "
+                      f"[{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  compile {r['compile_ours_ms']:5.0f}/"
+                      f"{r['compile_jacfwd_ms']:5.0f} ms  x{r['repeats']}  "
+                      f"diff64 {r['max_abs_diff_float64']:.1e}  diff{args.dtype[-2:]} "
+                      f"{r['max_abs_diff_timed_dtype']:.1e}", flush=True)
+
+    elapsed = time.perf_counter() - t_start
+    print()
+    print(f"## Results ({args.dtype}; per element = median time per call / N; ratio = median over "
+          f"interleaved repetitions of jacfwd time / closed-form time, >1 means the closed form is "
+          f"faster; IQR of those ratios; max |diff| = max abs difference closed form vs jacfwd in "
+          f"float64 on the same inputs)")
+    print()
+    print(render(HEADER, table_rows(results, args.markdown), args.markdown))
+    print()
+    print(summary(results, skipped, args.markdown))
+    print()
+    print(f"total benchmark time: {elapsed:.0f} s")
+
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"machine": info, "results": results,
+                       "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
+                       "elapsed_s": elapsed}, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
