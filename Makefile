@@ -5,7 +5,7 @@ PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench accuracy clean
+.PHONY: demo test bench accuracy docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -13,6 +13,10 @@ $(PY):
 
 $(VENV)/.installed-examples: pyproject.toml | $(PY)
 	$(PY) -m pip install -q -e ".[examples]"
+	touch $@
+
+$(VENV)/.installed-docs: pyproject.toml | $(PY)
+	$(PY) -m pip install -q -e ".[docs]"
 	touch $@
 
 $(VENV)/.installed-test: pyproject.toml | $(PY)
@@ -30,6 +34,10 @@ bench: $(VENV)/.installed-test
 
 accuracy: $(VENV)/.installed-test
 	$(PY) benchmarks/accuracy.py
+
+# The API reference, generated from the docstrings: open out/docs/index.html.
+docs: $(VENV)/.installed-docs
+	$(PY) -m pdoc --docformat google --math -o out/docs jaxlie_geo
 
 clean:
 	rm -rf $(VENV) out build *.egg-info
