@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array, pytree_dataclass
+from ._base import SEBase, as_float_array, materialize, pytree_dataclass
 from ._so3 import (
     SO3,
     cross,
@@ -109,7 +109,7 @@ class SE3(SEBase[SO3]):
     def exp(cls, tangent: hints.Array) -> SE3:
         """q = exp_SO3(ω); t = V v = v + F1 (ω × v) + F2 (ω × (ω × v)), θ = ‖ω‖
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
-        xi = cls._check_tangent(tangent)
+        xi = materialize(cls._check_tangent(tangent))
         v, w = xi[..., :3], xi[..., 3:]
         half = exp_half_angle(w)
         t = exp_translation(v, w, _KERNEL_FORM, half)
@@ -119,7 +119,7 @@ class SE3(SEBase[SO3]):
     def log(self) -> jax.Array:
         """ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
         G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
-        p = self.wxyz_xyz
+        p = materialize(self.wxyz_xyz)
         u, s, h = log_quaternion_parts(p[..., :4])
         v = log_translation(p[..., 4:], u, s, h, _KERNEL_FORM)
         return jnp.concatenate([v, s[..., None] * u], axis=-1)

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SOBase, as_float_array, pytree_dataclass, resolve_dtype
+from ._base import SOBase, as_float_array, materialize, pytree_dataclass, resolve_dtype
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -280,11 +280,11 @@ class SO3(SOBase):
         """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖, with both coefficients as series-safe
         kernels of θ²/4 (seed 002's Rodrigues form, in quaternions). Any angle; for
         θ > π the result has w < 0 (it is not re-signed)."""
-        return SO3(exp_quaternion(cls._check_tangent(tangent)))
+        return SO3(exp_quaternion(materialize(cls._check_tangent(tangent))))
 
     @override
     def log(self) -> jax.Array:
-        return log_quaternion(self.wxyz)
+        return log_quaternion(materialize(self.wxyz))
 
     @classmethod
     @override
@@ -340,11 +340,11 @@ class SO3(SOBase):
 
     @override
     def apply(self, target: hints.Array) -> jax.Array:
-        return rotate(self.wxyz, self._check_points(target))
+        return rotate(*materialize(self.wxyz, self._check_points(target)))
 
     @override
     def multiply(self, other: SO3) -> SO3:
-        return SO3(quaternion_product(self.wxyz, other.wxyz))
+        return SO3(quaternion_product(*materialize(self.wxyz, other.wxyz)))
 
     @override
     def inverse(self) -> SO3:
