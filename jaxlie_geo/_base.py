@@ -148,6 +148,16 @@ _NOT_JITTED = frozenset({"get_batch_axes", "parameters", "reshape"})
 _STATIC_NAMES = ("batch_axes", "dtype")
 
 
+def _inherited_doc(cls: type, name: str) -> Any:
+    """The docstring of ``name`` in the nearest base class that documents it."""
+    for base in cls.__mro__[1:]:
+        raw = base.__dict__.get(name)
+        fn = getattr(raw, "__func__", raw)
+        if fn is not None and getattr(fn, "__doc__", None):
+            return fn.__doc__
+    return None
+
+
 def _jit_public_methods(cls: type) -> None:
     """Wrap every public method of ``cls`` (inherited ones included) in ``jax.jit``.
 
@@ -188,6 +198,8 @@ def _jit_public_methods(cls: type) -> None:
             call = jitted  # type: ignore[assignment]
         wrapper = functools.wraps(fn)(call)
         wrapper._jitted = True  # type: ignore[attr-defined]
+        if not fn.__doc__:  # an override documented in the base class: show the base's text
+            wrapper.__doc__ = _inherited_doc(cls, name)
         setattr(cls, name, kind(wrapper) if kind else wrapper)
 
 

@@ -684,3 +684,18 @@ def test_repr_names_the_field_and_rounds_the_values(G):
     assert "Array(" not in text and "dtype" not in text
     traced = jax.jit(lambda T: (repr(T), T)[1])  # repr of a traced element does not fail
     traced(T)
+
+
+@over_groups
+def test_every_public_method_is_documented(G):
+    """help(G.method) shows text: overrides without their own docstring show the base's."""
+    import inspect
+
+    undocumented = [
+        name
+        for name in dir(G)
+        if not name.startswith("_")
+        and callable(getattr(G, name))
+        and not (inspect.getdoc(getattr(G, name)) or "").strip()
+    ]
+    assert undocumented == [], undocumented
