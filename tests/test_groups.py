@@ -699,3 +699,48 @@ def test_every_public_method_is_documented(G):
         and not (inspect.getdoc(getattr(G, name)) or "").strip()
     ]
     assert undocumented == [], undocumented
+
+
+# ---------------------------------------------------------------------------------
+# Closed-form kernels: no matrices inside.
+
+
+def _all_avals(jaxpr):
+    """Every intermediate's abstract value, sub-jaxprs (jit, custom_jvp, ...) included."""
+    out = []
+    for eqn in jaxpr.eqns:
+        out += [v.aval for v in eqn.outvars]
+        for param in eqn.params.values():
+            subs = param if isinstance(param, (list, tuple)) else [param]
+            for sub in subs:
+                inner = getattr(sub, "jaxpr", None)
+                if inner is not None:
+                    out += _all_avals(getattr(inner, "jaxpr", inner))
+    return out
+
+
+@pytest.mark.parametrize("G", [SO3, SE3], ids=lambda G: G.__name__)
+def test_no_matrix_intermediates_in_the_kernels(G):
+    """exp, log, compose, apply, inverse and interpolate of SO3/SE3 are quaternion algebra
+    and cross products: no (…, 3, 3) or (…, 4, 4) array appears in their jaxprs."""
+    T = random_element(G, 1, (5,), jnp.float32)
+    x = random_tangent(G, 1, (5,), jnp.float32)
+    p = random_points(G, 1, (5,), jnp.float32)
+    ops = {
+        "exp": lambda x: G.exp(x).parameters(),
+        "log": lambda T: T.log(),
+        "compose": lambda T: (T @ T).parameters(),
+        "apply": lambda T: T @ p,
+        "inverse": lambda T: T.inverse().parameters(),
+        "interpolate": lambda T: T.interpolate(T[::-1], 0.3).parameters(),
+    }
+    for name, f in ops.items():
+        arg = x if name == "exp" else T
+        avals = _all_avals(jax.make_jaxpr(f)(arg).jaxpr)
+        assert avals, name
+        matrices = [a.shape for a in avals
+                    if len(getattr(a, "shape", ())) >= 2 and a.shape[-2:] in ((3, 3), (4, 4))]
+        assert matrices == [], (name, matrices)
+    # the check can fail: as_matrix does build 3x3 blocks
+    avals = _all_avals(jax.make_jaxpr(lambda T: T.as_matrix())(T).jaxpr)
+    assert any(len(a.shape) >= 2 and a.shape[-2:] in ((3, 3), (4, 4)) for a in avals)
