@@ -411,9 +411,10 @@ def test_differentiable_at_zero(G, dtype, name):
     # d ad(x)/dx_i = ad(e_i) (linear); the first-order term of each series is ∓½ ad.
     coef = {"jac_right": -0.5, "jac_left": 0.5, "jac_right_inv": 0.5, "jac_left_inv": -0.5, "ad": 1.0}[name]
     ad_e = np.moveaxis(to_np(G.ad(jnp.eye(k, dtype=dtype))), 0, -1)  # (k, k, k_in)
+    jitted = {jac: jax.jit(jac(f)) for jac in (jax.jacfwd, jax.jacrev)}  # one compile each
     for x in (jnp.zeros(k, dtype), jnp.full(k, 1e-20, dtype)):
-        for jac in (jax.jacfwd, jax.jacrev):
-            d = to_np(jax.jit(jac(f))(x))
+        for jac, df in jitted.items():
+            d = to_np(df(x))
             assert d.shape == (k, k, k) and np.all(np.isfinite(d)), (name, jac.__name__)
             np.testing.assert_allclose(d, coef * ad_e, **_tol(dtype, 4))
     # Second derivatives are finite at 0 too.
