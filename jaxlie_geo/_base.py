@@ -203,6 +203,19 @@ def _jit_public_methods(cls: type) -> None:
         setattr(cls, name, kind(wrapper) if kind else wrapper)
 
 
+def jit_function(*static_argnames: str) -> Any:
+    """Decorator: wrap a module-level public function in ``jax.jit`` (the named arguments
+    static), as the group methods are, so that an eager call is one dispatch. Measured
+    eager before: ``jacobians.compose`` 228 µs, ``motion.arc`` 1.3 ms (one dispatch per
+    primitive). Shape errors still raise at trace time."""
+
+    def wrap(fn: Any) -> Any:
+        jitted = jax.jit(fn, static_argnames=static_argnames)
+        return functools.wraps(fn)(lambda *args, **kwargs: jitted(*args, **kwargs))
+
+    return wrap
+
+
 # ---------------------------------------------------------------------------------
 # Base classes.
 

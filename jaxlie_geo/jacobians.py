@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as onp
 
 from . import hints
-from ._base import MatrixLieGroup, SEBase
+from ._base import MatrixLieGroup, SEBase, jit_function
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
@@ -55,21 +55,25 @@ def _broadcast(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
     )
 
 
+@jit_function()
 def compose(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``a @ b`` w.r.t. ``a`` and ``b``: ``(Ad(b⁻¹), I)``."""
     return _broadcast(b.inverse().adjoint(), _eye_like(a.multiply(b)))
 
 
+@jit_function()
 def inverse(a: GroupT) -> jax.Array:
     """Jacobian of ``a⁻¹`` w.r.t. ``a``: ``−Ad(a)``."""
     return -a.adjoint()
 
 
+@jit_function()
 def between(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``a⁻¹ @ b`` w.r.t. ``a`` and ``b``: ``(−Ad(b⁻¹ a), I)``."""
     return _broadcast(-(b.inverse().multiply(a)).adjoint(), _eye_like(a.inverse().multiply(b)))
 
 
+@jit_function()
 def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``τ = log(a⁻¹ @ b)`` (the pose-graph residual, ``manifold.rminus``)
     w.r.t. ``a`` and ``b``: ``(−J_l⁻¹(τ), J_r⁻¹(τ))``."""
@@ -78,6 +82,7 @@ def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     return -G.jac_left_inv(tau), G.jac_right_inv(tau)
 
 
+@jit_function()
 def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``a @ exp(δ)`` w.r.t. ``a`` and ``δ``: ``(Ad(exp(−δ)), J_r(δ))``."""
     G = type(a)
@@ -87,11 +92,13 @@ def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
     return _broadcast(J_a, J_d)
 
 
+@jit_function("G")
 def exp(G: type, tangent: hints.Array) -> jax.Array:
     """Jacobian of ``G.exp`` at ``tangent``: the right Jacobian ``J_r``."""
     return G.jac_right(tangent)
 
 
+@jit_function()
 def log(a: MatrixLieGroup) -> jax.Array:
     """Jacobian of ``a.log()`` w.r.t. ``a``: ``J_r⁻¹(log a)`` (= ``a.jlog()``)."""
     return a.jlog()
@@ -130,6 +137,7 @@ def _matmul(A: jax.Array, B: jax.Array) -> jax.Array:
     return jnp.stack(rows, axis=-2)
 
 
+@jit_function("G")
 def generator_action(G: type, points: hints.Array) -> jax.Array:
     """K(p): ``d (hat(δ) p̃)[:space_dim] / dδ``, shape ``(*batch, space_dim, tangent_dim)``
     (p̃ = (p, 1) for SE groups): e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3). Entry (i, j)
@@ -146,6 +154,7 @@ def generator_action(G: type, points: hints.Array) -> jax.Array:
     )
 
 
+@jit_function()
 def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``T @ p`` w.r.t. ``T`` (right perturbation) and ``p``:
     ``(R K(p), R)`` with R the rotation matrix; shapes ``(*batch, space_dim, tangent_dim)``

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array, pytree_dataclass
+from ._base import MatrixLieGroup, as_float_array, jit_function, pytree_dataclass
 from ._geodesic import Geodesic
 from ._se2 import SE2
 
@@ -54,6 +54,7 @@ def velocity_between(start: GroupT, end: GroupT, duration: hints.Scalar) -> jax.
     return tangent / duration[..., None].astype(tangent.dtype)
 
 
+@jit_function()
 def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
     """Pose at time ``t`` of a body leaving ``start`` with constant body velocity:
     ``start @ exp(t · velocity)``.
@@ -99,6 +100,7 @@ class Arc:
         return self.speed / jnp.abs(self.angular_velocity)
 
 
+@jit_function()
 def arc(start: SE2, velocity: hints.Array) -> Arc:
     """The circle (or line) traced by an SE(2) body with constant body velocity
     ``(vx, vy, ω)`` (seed 000 §5.1–5.4, with the chord written AB = (R − I)·OA, not the

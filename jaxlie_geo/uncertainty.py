@@ -10,13 +10,14 @@ Propagation is first order through the Jacobians of ``jaxlie_geo.jacobians``
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Optional, Tuple, TypeVar
 
 import jax
 import jax.numpy as jnp
 
 from . import hints, jacobians
-from ._base import MatrixLieGroup, as_float_array, resolve_dtype
+from ._base import MatrixLieGroup, as_float_array, jit_function, resolve_dtype
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
@@ -30,6 +31,7 @@ def _check_cov(T: MatrixLieGroup, cov: hints.Array, name: str, where: str) -> ja
     return as_float_array(cov, name, (k, k), where)
 
 
+@jit_function()
 def propagate_compose(
     a: GroupT,
     cov_a: hints.Array,
@@ -51,12 +53,14 @@ def propagate_compose(
     return out
 
 
+@jit_function()
 def propagate_inverse(a: GroupT, cov_a: hints.Array) -> jax.Array:
     """Covariance of ``a⁻¹``: ``Ad(a) Σ Ad(a)ᵀ``."""
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_inverse")
     return _sandwich(jacobians.inverse(a), cov_a)
 
 
+@jit_function()
 def propagate_apply(
     T: GroupT, cov_T: hints.Array, points: hints.Array, cov_points: Optional[hints.Array] = None
 ) -> jax.Array:
@@ -81,6 +85,16 @@ def sample(
     """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky).
 
     Returns a batch of shape ``(*batch_axes, *mean.get_batch_axes())``."""
+    return _sample(key, mean, cov, tuple(batch_axes))
+
+
+@functools.partial(jax.jit, static_argnames=("batch_axes",))
+def _sample(
+    key: jax.Array,
+    mean: GroupT,
+    cov: hints.Array,
+    batch_axes: Tuple[int, ...] = (),
+) -> GroupT:
     cov = _check_cov(mean, cov, "cov", "sample")
     G = type(mean)
     dtype = jnp.result_type(mean.parameters(), cov)
@@ -90,6 +104,7 @@ def sample(
     return mean.multiply(G.exp(jnp.einsum("...ij,...j->...i", L, z)))
 
 
+@jit_function("tol", "max_iters")
 def mean(
     poses: GroupT,
     weights: Optional[hints.Array] = None,
