@@ -109,17 +109,9 @@ def parse_args(argv=None):
     args = p.parse_args(argv)
     if args.sizes is None:
         args.sizes = "1000" if args.quick else "100000"
-    args.sizes = [int(float(s)) for s in args.sizes.split(",") if s.strip()]
-    args.groups = [g.strip().upper() for g in args.groups.split(",") if g.strip()]
-    args.cases = [c.strip() for c in args.cases.split(",") if c.strip()]
-    for g in args.groups:
-        if g not in GROUPS:
-            p.error(f"unknown group {g!r}; choose from {GROUPS}")
-    for c in args.cases:
-        if c not in CASES:
-            p.error(f"unknown case {c!r}; choose from {tuple(CASES)}")
-    if any(n < 1 for n in args.sizes):
-        p.error("sizes must be >= 1")
+    args.sizes = _run.parse_sizes(p, args.sizes)
+    args.groups = _run.parse_choices(p, args.groups, GROUPS, "group", str.upper)
+    args.cases = _run.parse_choices(p, args.cases, CASES, "case")
     args.candidate = "jaxlie_geo"  # for run.machine_info
     return args
 

@@ -85,18 +85,27 @@ def parse_args(argv=None):
 
     if args.sizes is None:
         args.sizes = "1,100" if args.quick else "1,1000,1000000"
-    args.sizes = [int(float(s)) for s in args.sizes.split(",") if s.strip()]
-    args.groups = [g.strip().upper() for g in args.groups.split(",") if g.strip()]
-    args.ops = [o.strip().lower() for o in args.ops.split(",") if o.strip()]
-    for g in args.groups:
-        if g not in GROUPS:
-            p.error(f"unknown group {g!r}; choose from {GROUPS}")
-    for o in args.ops:
-        if o not in OPS:
-            p.error(f"unknown op {o!r}; choose from {OPS}")
-    if any(n < 1 for n in args.sizes):
-        p.error("sizes must be >= 1")
+    args.sizes = parse_sizes(p, args.sizes)
+    args.groups = parse_choices(p, args.groups, GROUPS, "group", str.upper)
+    args.ops = parse_choices(p, args.ops, OPS, "op", str.lower)
     return args
+
+
+def parse_sizes(p, text: str) -> list:
+    """Comma-separated batch sizes ("1,1e3") -> ints >= 1 (argparse error otherwise)."""
+    sizes = [int(float(s)) for s in text.split(",") if s.strip()]
+    if any(n < 1 for n in sizes):
+        p.error("sizes must be >= 1")
+    return sizes
+
+
+def parse_choices(p, text: str, choices, what: str, norm=lambda x: x) -> list:
+    """Comma-separated names, normalised by ``norm``, each one of ``choices``."""
+    items = [norm(x.strip()) for x in text.split(",") if x.strip()]
+    for x in items:
+        if x not in choices:
+            p.error(f"unknown {what} {x!r}; choose from {tuple(choices)}")
+    return items
 
 
 # --------------------------------------------------------------------------------------
