@@ -58,7 +58,6 @@ import argparse
 import importlib
 import json
 import os
-import statistics
 import sys
 import time
 
@@ -341,17 +340,15 @@ def bench_case(lib, group, case, n, args, index):
         diff = check(lib, group, case, inputs64)
         set_x64(jax, False)
 
-    med_ours, med_ad = statistics.median(t_ours), statistics.median(t_ad)
-    paired = [b / a for a, b in zip(t_ours, t_ad)]
-    q1, q3 = _run.quantiles(paired)
+    st = _run.paired_stats(t_ours, t_ad)
     label, mapping, _ = CASES[case]
     return {
         "group": group, "case": case, "jacobian": label, "map": mapping, "n": n, "dtype": args.dtype,
-        "ours_ns_per_elem": med_ours * 1e9 / n,
-        "jacfwd_ns_per_elem": med_ad * 1e9 / n,
-        "ratio": statistics.median(paired),
-        "ratio_of_medians": med_ad / med_ours,
-        "ratio_q1": q1, "ratio_q3": q3,
+        "ours_ns_per_elem": st["median_a"] * 1e9 / n,
+        "jacfwd_ns_per_elem": st["median_b"] * 1e9 / n,
+        "ratio": st["ratio"],
+        "ratio_of_medians": st["ratio_of_medians"],
+        "ratio_q1": st["ratio_q1"], "ratio_q3": st["ratio_q3"],
         "compile_ours_ms": comp_ours * 1e3,
         "compile_jacfwd_ms": comp_ad * 1e3,
         "repeats": len(t_ours),

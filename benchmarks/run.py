@@ -315,6 +315,16 @@ def interleaved(fn_a, fn_b, args, repeats, target_s, budget_s, min_repeats=7):
     return ta, tb
 
 
+def paired_stats(t_a, t_b) -> dict:
+    """Medians of two interleaved timing series and the ratio b/a as the median of the paired
+    (same-repetition) ratios, robust to slow drift of the machine, with its quartiles."""
+    paired = [b / a for a, b in zip(t_a, t_b)]
+    q1, q3 = quantiles(paired)
+    med_a, med_b = statistics.median(t_a), statistics.median(t_b)
+    return {"median_a": med_a, "median_b": med_b, "ratio": statistics.median(paired),
+            "ratio_of_medians": med_b / med_a, "ratio_q1": q1, "ratio_q3": q3}
+
+
 def quantiles(xs):
     xs = sorted(xs)
     if len(xs) == 1:
@@ -381,17 +391,14 @@ def bench_case(geo, ref, native, group, op, n, args, dtype):
     repeats = 3 if (args.quick and args.repeats is None) else args.repeats
     t_geo, t_ref = interleaved(c_geo, c_ref, inputs, repeats, target_s, budget_s)
 
-    med_geo, med_ref = statistics.median(t_geo), statistics.median(t_ref)
-    # Ratio = median of the paired (same-repetition) ratios: robust to slow drift of the machine.
-    paired = [r / g for g, r in zip(t_geo, t_ref)]
-    q1, q3 = quantiles(paired)
+    st = paired_stats(t_geo, t_ref)
     return {
         "group": group, "op": op, "n": n, "dtype": args.dtype,
-        "geo_ns_per_elem": med_geo * 1e9 / n,
-        "ref_ns_per_elem": med_ref * 1e9 / n,
-        "ratio": statistics.median(paired),
-        "ratio_of_medians": med_ref / med_geo,
-        "ratio_q1": q1, "ratio_q3": q3,
+        "geo_ns_per_elem": st["median_a"] * 1e9 / n,
+        "ref_ns_per_elem": st["median_b"] * 1e9 / n,
+        "ratio": st["ratio"],
+        "ratio_of_medians": st["ratio_of_medians"],
+        "ratio_q1": st["ratio_q1"], "ratio_q3": st["ratio_q3"],
         "compile_geo_ms": comp_geo * 1e3,
         "compile_ref_ms": comp_ref * 1e3,
         "repeats": len(t_geo),
