@@ -13,6 +13,7 @@ from ._base import SEBase, as_float_array, materialize, pytree_dataclass
 from ._so3 import (
     SO3,
     cross,
+    by_angle,
     dot,
     exp_half_angle,
     exp_quaternion,
@@ -34,6 +35,7 @@ def exp_translation(
     w: jax.Array,
     form: str = "seed000",
     half: Optional[Tuple[jax.Array, jax.Array]] = None,
+    compensated: bool = True,
 ) -> jax.Array:
     """t = V(ω) v, θ = ‖ω‖, in one of two algebraically equal forms:
 
@@ -44,7 +46,8 @@ def exp_translation(
       no cancellation at large angles (F0 = sin θ/θ is computed directly).
 
     F0 = c k, F1 = k²/2 and F2 come from ``half`` = (cos(θ/2), sin(θ/2)/(θ/2))
-    (``exp_half_angle``), so exp costs one sincos in all.
+    (``exp_half_angle``), so exp costs one sincos in all. ``compensated``: the seed000
+    form's ω·v as an error-free dot, needed only near θ = 2πk (see ``by_angle``).
     """
     c, k = exp_half_angle(w) if half is None else half
     x = sq_norm(w)
@@ -52,7 +55,8 @@ def exp_translation(
     wxv = cross(w, v)
     f1, f2 = (0.5 * k * k)[..., None], _scalar.F2(x, f0)[..., None]
     if form == "seed000":
-        wv = _scalar.dot_compensated(w, v)[..., None]  # cancels for v ⟂ ω; see the kernel
+        # cancels for v ⟂ ω near θ = 2πk, where F0 → 0; see the kernel
+        wv = (_scalar.dot_compensated(w, v) if compensated else dot(w, v))[..., None]
         return f0[..., None] * v + f1 * wxv + f2 * wv * w
     return v + f1 * wxv + f2 * cross(w, wxv)
 
@@ -111,9 +115,12 @@ class SE3(SEBase[SO3]):
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
         xi = materialize(cls._check_tangent(tangent))
         v, w = xi[..., :3], xi[..., 3:]
-        half = exp_half_angle(w)
-        t = exp_translation(v, w, _KERNEL_FORM, half)
-        return SE3(jnp.concatenate([exp_quaternion(w, half), t], axis=-1))
+        def kernel(compensated: bool) -> jax.Array:
+            half = exp_half_angle(w, compensated)
+            t = exp_translation(v, w, _KERNEL_FORM, half, compensated)
+            return jnp.concatenate([exp_quaternion(w, half), t], axis=-1)
+
+        return SE3(by_angle(w, kernel))
 
     @override
     def log(self) -> jax.Array:

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Optional, Tuple
+import math
+from typing import Any, Callable, Optional, Tuple, TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -10,6 +11,8 @@ from typing_extensions import override
 
 from . import _scalar, hints
 from ._base import SOBase, as_float_array, materialize, pytree_dataclass, resolve_dtype
+
+T = TypeVar("T")
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -52,10 +55,39 @@ def exp_quaternion(
     return jnp.concatenate([c[..., None], (0.5 * k)[..., None] * omega], axis=-1)
 
 
-def exp_half_angle(omega: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖, with θ² summed compensated (hi + lo) so that
-    angles far beyond π keep full accuracy (with a plain θ², 5 ulp at θ ≈ 16)."""
-    return _scalar.half_angle(*_scalar.sq_norm_compensated(omega))
+def exp_half_angle(
+    omega: jax.Array, compensated: bool = True
+) -> Tuple[jax.Array, jax.Array]:
+    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖. With ``compensated``, θ² is summed as hi + lo
+    so that angles far beyond π keep full accuracy (with a plain θ², 5 ulp at θ ≈ 16);
+    without, it costs what jaxlie's kernel costs and is accurate while θ² ≤
+    ``_scalar.HALF_ANGLE_PLAIN_MAX`` (see ``by_angle``)."""
+    if compensated:
+        return _scalar.half_angle(*_scalar.sq_norm_compensated(omega))
+    return _scalar.half_angle(sq_norm(omega))
+
+
+_BY_ANGLE_MIN_BATCH = 256
+
+
+def by_angle(omega: jax.Array, kernel: Callable[[bool], T]) -> T:
+    """``kernel(compensated)`` with ``compensated = True`` only when some rotation angle
+    ‖ω‖ of the batch exceeds √``HALF_ANGLE_PLAIN_MAX``: the error-free sums that angles
+    far beyond π need (``exp_half_angle``, ``_scalar.dot_compensated``) tripled the work
+    of SO3.exp, and they made XLA:CPU split it into 5 fusions, 3 spread over threads,
+    which at 10³ elements cost 2.5x jaxlie's time. One batch-level ``lax.cond`` on CPU
+    for batches of at least ``_BY_ANGLE_MIN_BATCH`` elements (static shapes: under
+    ``vmap`` the function sees one element); smaller batches, where the cond's dispatch
+    costs more than it saves, and other backends (GPU: a cond would stall on the
+    predicate) always take the compensated kernel."""
+    if math.prod(omega.shape[:-1]) < _BY_ANGLE_MIN_BATCH:
+        return kernel(True)
+
+    def on_cpu() -> T:
+        big = jnp.any(sq_norm(omega) > _scalar.HALF_ANGLE_PLAIN_MAX)
+        return jax.lax.cond(big, lambda: kernel(True), lambda: kernel(False))
+
+    return jax.lax.platform_dependent(cpu=on_cpu, default=lambda: kernel(True))
 
 
 def log_quaternion(wxyz: jax.Array) -> jax.Array:
@@ -280,7 +312,8 @@ class SO3(SOBase):
         """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖, with both coefficients as series-safe
         kernels of θ²/4 (seed 002's Rodrigues form, in quaternions). Any angle; for
         θ > π the result has w < 0 (it is not re-signed)."""
-        return SO3(exp_quaternion(materialize(cls._check_tangent(tangent))))
+        w = materialize(cls._check_tangent(tangent))
+        return SO3(by_angle(w, lambda comp: exp_quaternion(w, exp_half_angle(w, comp))))
 
     @override
     def log(self) -> jax.Array:

@@ -744,3 +744,31 @@ def test_no_matrix_intermediates_in_the_kernels(G):
     # the check can fail: as_matrix does build 3x3 blocks
     avals = _all_avals(jax.make_jaxpr(lambda T: T.as_matrix())(T).jaxpr)
     assert any(len(a.shape) >= 2 and a.shape[-2:] in ((3, 3), (4, 4)) for a in avals)
+
+
+# ---------------------------------------------------------------------------------
+# exp picks its angle path per batch (``_so3.by_angle``): one element far beyond π sends
+# the whole batch through the compensated kernel. Both paths, and vmap (where the cond
+# becomes a select), must agree on the small angles.
+
+
+@pytest.mark.parametrize("G", [SO3, SE3], ids=["SO3", "SE3"])
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=["float32", "float64"])
+def test_exp_path_choice_is_invisible(G, dtype):
+    small = random_tangent(G, 3, (512,), dtype)  # angles below π: the plain kernel
+    big = random_tangent(G, 4, (1,), dtype, max_angle=30.0)
+    big[..., -3:] *= 30.0 / np.linalg.norm(big[..., -3:], axis=-1, keepdims=True)
+    alone = to_np(G.exp(small).parameters())
+    mixed = to_np(G.exp(np.concatenate([small, big])).parameters())
+    # vmap and a batch under _BY_ANGLE_MIN_BATCH: the compensated kernel.
+    mapped = to_np(jax.vmap(lambda x: G.exp(x).parameters())(small))
+    few = to_np(G.exp(small[:8]).parameters())
+    eps = float(jnp.finfo(dtype).eps)
+    scale = np.maximum(1.0, np.max(np.abs(alone), axis=-1, keepdims=True))
+    # Both kernels are exact to a few ulp (test_accuracy); they may round differently.
+    assert np.max(np.abs(mixed[:-1] - alone) / scale) <= 4 * eps
+    assert np.max(np.abs(mapped - alone) / scale) <= 4 * eps
+    assert np.max(np.abs(few - alone[:8]) / scale[:8]) <= 4 * eps
+    # The big element takes the compensated path either way (its accuracy beyond π is
+    # tests/test_accuracy.py's "beyond_pi" regime, whose batches hold only such angles).
+    np.testing.assert_array_equal(mixed[-1:], to_np(G.exp(big).parameters()))
