@@ -13,6 +13,10 @@ Each kernel is evaluated as
   (the number of terms is chosen at trace time, per dtype), and
 * a closed form without catastrophic cancellation above the switch.
 
+(``half_angle``, the pair cos(θ/2), sin(θ/2)/(θ/2) behind every SO(3)/SE(3) exp, is the
+exception: its values are closed forms, which need no series, and its derivatives an
+exact custom JVP whose one cancelling term is summed from a series.)
+
 Both branches are evaluated on clamped arguments (the ``jnp.where``-safe pattern), so
 no NaN or inf from the unused branch reaches a gradient. The switch sits where the
 closed form's value *and its first two autodiff derivatives* are accurate, which for

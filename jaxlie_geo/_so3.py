@@ -309,9 +309,10 @@ class SO3(SOBase):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SO3:
-        """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖, with both coefficients as series-safe
-        kernels of θ²/4 (seed 002's Rodrigues form, in quaternions). Any angle; for
-        θ > π the result has w < 0 (it is not re-signed)."""
+        """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖ (seed 002's Rodrigues form, in
+        quaternions), both coefficients from ``_scalar.half_angle`` (closed forms with an
+        exact custom JVP; θ² compensated when the batch holds an angle beyond √10, see
+        ``by_angle``). Any angle; for θ > π the result has w < 0 (it is not re-signed)."""
         w = materialize(cls._check_tangent(tangent))
         return SO3(by_angle(w, lambda comp: exp_quaternion(w, exp_half_angle(w, comp))))
 

@@ -137,3 +137,29 @@ def test_measure_catches_jaxlie_defects():
     zero = (c.regime == "zero") & (c.size >= 1.0)
     off = errors["jac"][zero] * np.finfo(np.float64).eps
     assert np.all((off > 0.5 / np.sqrt(3) - 1e-9) & (off < 0.5 + 1e-9)), off
+
+
+@pytest.mark.parametrize("dtype", M.DTYPES)
+@pytest.mark.parametrize("group", ["SO3", "SE3"])
+def test_exp_plain_path(group, dtype):
+    """exp's plain kernel (``_so3.by_angle``: a batch of ≥ 256 whose angles are all ≤ √10)
+    against mpmath. The grid above never reaches it: its exp batch holds the beyond-π
+    cases, which send the whole batch through the compensated kernel."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxlie_geo import _scalar, _so3
+
+    cases = _cases(group, dtype)
+    m = cases.regime != "beyond_pi"
+    x = cases.tangent[m]
+    assert len(x) >= _so3._BY_ANGLE_MIN_BATCH
+    assert np.max(np.sum(x[:, -3:].astype(np.float64) ** 2, -1)) <= _scalar.HALF_ANGLE_PLAIN_MAX
+    G = getattr(jaxlie_geo, group)
+    with M.x64_for(dtype):
+        got = np.asarray(jax.jit(lambda x: G.exp(x).parameters())(jnp.asarray(x)))
+        # The compensated kernel on the same inputs differs: the plain path was taken.
+        comp = np.asarray(jax.jit(jax.vmap(lambda x: G.exp(x).parameters()))(jnp.asarray(x)))
+    assert np.any(got != comp)
+    e = M.ulp_errors(got, cases.exp_hi[m], cases.exp_lo[m], M.EXP_BLOCKS[group], dtype)
+    assert float(e.max()) <= M.BOUNDS["exp"], f"{group} {dtype}: {float(e.max()):.2f} ulp"
