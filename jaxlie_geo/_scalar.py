@@ -433,8 +433,6 @@ def atan2_over(n2: jax.Array, w: jax.Array) -> jax.Array:
     with A(s) = atan(√s)/√s = Σ (−1)ᵏ sᵏ/(2k+1) summed as a polynomial (s ≤ 0.172).
     No branch, no √n2: values and derivatives of every order are smooth and accurate
     from n = 0 (the identity) to w = 0 (θ = π) inclusive, for any quaternion norm."""
-    r = jnp.sqrt(n2 + w * w)
-    wr = w + r
-    u2 = n2 / (wr * wr)
-    c = 1.0 + jnp.sqrt(1.0 + u2)
-    return 4.0 * _horner("atan", u2 / (c * c), _ATAN_X_MAX) / (wr * c)
+    wr = w + jnp.sqrt(n2 + w * w)
+    inv = 1.0 / (wr + jnp.sqrt(wr * wr + n2))  # 1/((w + r)(1 + √(1 + u²)))
+    return 4.0 * _horner("atan", n2 * inv * inv, _ATAN_X_MAX) * inv

@@ -115,12 +115,12 @@ class SE3(SEBase[SO3]):
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices)."""
         xi = materialize(cls._check_tangent(tangent))
         v, w = xi[..., :3], xi[..., 3:]
-        def kernel(compensated: bool) -> jax.Array:
+        def kernel(compensated: bool, w: jax.Array, v: jax.Array) -> jax.Array:
             half = exp_half_angle(w, compensated)
             t = exp_translation(v, w, _KERNEL_FORM, half, compensated)
             return jnp.concatenate([exp_quaternion(w, half), t], axis=-1)
 
-        return SE3(by_angle(w, kernel))
+        return SE3(by_angle(kernel, w, v))
 
     @override
     def log(self) -> jax.Array:

@@ -772,3 +772,26 @@ def test_exp_path_choice_is_invisible(G, dtype):
     # The big element takes the compensated path either way (its accuracy beyond π is
     # tests/test_accuracy.py's "beyond_pi" regime, whose batches hold only such angles).
     np.testing.assert_array_equal(mixed[-1:], to_np(G.exp(big).parameters()))
+
+
+@pytest.mark.parametrize("G", [SO3, SE3], ids=["SO3", "SE3"])
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=["float32", "float64"])
+def test_exp_derivative_takes_one_kernel(G, dtype):
+    """by_angle's custom JVP: a gradient through a large batch differentiates the
+    compensated kernel alone (no cond to compile and transpose twice), and equals the
+    per-element gradient (vmap, which never takes the batch-level choice)."""
+    xi = random_tangent(G, 5, (512,), dtype)
+    w = random_tangent(G, 6, (512,), dtype)
+
+    def loss(x):
+        return jnp.sum(w[..., : G.parameters_dim - 1] * G.exp(x).parameters()[..., 1:])
+
+    forward = str(jax.make_jaxpr(loss)(xi))
+    backward = str(jax.make_jaxpr(jax.grad(loss))(xi))
+    assert "cond[" in forward  # the choice is there on the forward pass (CPU) ...
+    assert "cond[" not in backward  # ... and not under differentiation
+    per_element = jax.vmap(jax.grad(lambda x, wi: jnp.sum(wi[: G.parameters_dim - 1] * G.exp(x).parameters()[1:])))
+    eps = float(jnp.finfo(dtype).eps)
+    np.testing.assert_allclose(
+        to_np(jax.grad(loss)(xi)), to_np(per_element(xi, w)), rtol=0, atol=16 * eps
+    )
