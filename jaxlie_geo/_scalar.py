@@ -58,7 +58,7 @@ C2              0.9, 2.5, 20.3         1.0, 2.5, 18.5
 D               1.6, 5.8, 25.2         0.9, 3.6, 30.3
 G               1.5, 6.2, 11.5         2.0, 5.9, 29.9
 G_principal     0.6, 1.7, 2.1          0.7, 1.9, 2.6
-atan2_over      1.3, 3.0, 2.7          1.5, 2.5, 2.5   (f, ∂/∂n2, ∂/∂w)
+atan2_over      1.3, 2.7, 2.6          1.5, 4.1, 3.0   (f, ∂/∂n2, ∂/∂w)
 ==============  =====================  =====================
 
 The second derivatives peak on the closed-form side of a switch, where autodiff of the

@@ -92,7 +92,7 @@ def by_angle(kernel: Callable[..., T], omega: jax.Array, *args: jax.Array) -> T:
     @jax.custom_jvp
     def chosen(omega: jax.Array, *args: jax.Array) -> T:
         def on_cpu() -> T:
-            big = jnp.max(sq_norm(omega)) > _scalar.HALF_ANGLE_PLAIN_MAX
+            big = jnp.any(sq_norm(omega) > _scalar.HALF_ANGLE_PLAIN_MAX)
             return jax.lax.cond(
                 big, lambda: kernel(True, omega, *args), lambda: kernel(False, omega, *args)
             )
