@@ -126,7 +126,7 @@ def log_quaternion_parts(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Arr
     u = sign[..., None] * wxyz[..., 1:]
     n2, aw = sq_norm(u), sign * w
     ratio = _scalar.atan2_over(n2, aw)
-    h = aw * ratio / jnp.sqrt(n2 + aw * aw)  # ‖q‖ (as atan2_over forms it): h is scale-invariant
+    h = aw * ratio / jnp.sqrt(n2 + aw * aw)  # ‖q‖ as atan2_over forms it: h is scale-invariant
     return u, 2.0 * ratio, h
 
 
