@@ -60,16 +60,17 @@ class SE2(SEBase[SO2]):
     def exp(cls, tangent: hints.Array) -> SE2:
         """R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
         B = (1 − cos θ)/θ = θ F1 (seed 001 §8.1; seed 000 §5 derives the same arc),
-        from the half angle: A = c k, B = θ k²/2 with c = cos(θ/2), k = sinc(θ/2)."""
+        all from one half-angle sincos: with c = cos(θ/2), k = sinc(θ/2), s = θk/2 =
+        sin(θ/2): A = c k, B = s k, sin θ = 2 s c, cos θ = (c − s)(c + s) (absolute error
+        ~eps at every angle). A second sincos, of θ, doubled the cost: 41 → 20 ns/element
+        at 10^6 in float32 (2 cores), for ≤ 0.5 ulp more worst error (2.0, README table)."""
         xi = cls._check_tangent(tangent)
         vx, vy, theta = xi[..., 0], xi[..., 1], xi[..., 2]
         c, k = _scalar.half_angle_of(theta)
-        A = c * k
-        B = 0.5 * theta * k * k
+        s = 0.5 * theta * k
+        A, B = c * k, s * k
         return SE2(
-            jnp.stack(
-                [jnp.cos(theta), jnp.sin(theta), A * vx - B * vy, B * vx + A * vy], axis=-1
-            )
+            jnp.stack([(c - s) * (c + s), 2.0 * s * c, A * vx - B * vy, B * vx + A * vy], axis=-1)
         )
 
     @override
