@@ -10,7 +10,6 @@ Propagation is first order through the Jacobians of ``jaxlie_geo.jacobians``
 
 from __future__ import annotations
 
-import functools
 from typing import Any, Optional, Tuple, TypeVar
 
 import jax
@@ -88,7 +87,7 @@ def sample(
     return _sample(key, mean, cov, tuple(batch_axes))
 
 
-@functools.partial(jax.jit, static_argnames=("batch_axes",))
+@jit_function("batch_axes")
 def _sample(
     key: jax.Array,
     mean: GroupT,
