@@ -77,6 +77,8 @@ def parse_args(argv=None):
     p.add_argument("--markdown", action="store_true", help="print the result tables as markdown")
     p.add_argument("--json", default=None, metavar="PATH", help="also write raw results as JSON")
     p.add_argument("--no-eager", action="store_true", help="skip the eager SE3.exp latency measurement")
+    p.add_argument("--memory-n", type=float, default=2**22,
+                   help="batch size of the memory table (SE3 ops, compiled, not run; 0 skips it)")
     p.add_argument("--candidate", default="jaxlie_geo",
                    help="module benchmarked against jaxlie (default jaxlie_geo; 'jaxlie' gives an "
                         "A/A run that calibrates the harness: all ratios should be ~1)")
@@ -445,6 +447,25 @@ def global_warmup(geo, ref, dtype):
 # --------------------------------------------------------------------------------------
 
 
+def memory_table(geo, ref, native, n: int, dtype, seed: int) -> list:
+    """Per SE3 op at batch n: XLA's buffer assignment for the compiled program (compiled,
+    not run), in MB: arguments, output, temporaries, for both libraries. Peak memory is at
+    most their sum."""
+    import jax
+
+    rows = []
+    for op in OPS:
+        small = make_inputs("SE3", op, 1, dtype, seed, ref)
+        specs = [jax.ShapeDtypeStruct((n,) + a.shape[1:], a.dtype) for a in small]
+        row = [op]
+        for lib, nat in ((geo, native), (ref, False)):
+            m = jax.jit(make_op(lib, "SE3", op, nat)).lower(*specs).compile().memory_analysis()
+            row += [m.argument_size_in_bytes / 1e6, m.output_size_in_bytes / 1e6,
+                    m.temp_size_in_bytes / 1e6]
+        rows.append(row)
+    return rows
+
+
 def fmt_ns(x: float) -> str:
     if x >= 1e6:
         return f"{x / 1e6:.2f} ms"
@@ -603,6 +624,10 @@ def main(argv=None):
         print(f"eager SE3.exp (batch 1, no jit): geo {eager['geo_us']:.1f} µs  jaxlie {eager['ref_us']:.1f} µs  "
               f"ratio {eager['ratio']:.2f} [{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}]", flush=True)
 
+    memory = None
+    if args.memory_n:
+        memory = memory_table(geo, ref, native, int(args.memory_n), dtype, args.seed)
+
     elapsed = time.perf_counter() - t_start
     print()
     print(f"## Results ({args.dtype}; per element = median time per call / N; ratio = median over "
@@ -618,11 +643,19 @@ def main(argv=None):
         print()
     print(summary(results, args.markdown, eager))
     print()
+    if memory is not None:
+        print(f"## Memory, SE3 at N = {fmt_n(int(args.memory_n))} ({args.dtype}; MB from XLA's buffer "
+              f"assignment: arguments, output, temporaries)")
+        print()
+        print(render_simple(["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
+                            [[r[0], f"{r[1]:.0f}", f"{r[2]:.0f}", f"{r[3]:.1f}", f"{r[6]:.1f}"]
+                             for r in memory], args.markdown))
+        print()
     print(f"total benchmark time: {elapsed:.0f} s")
 
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"machine": info, "results": results, "eager_se3_exp": eager,
+            json.dump({"machine": info, "results": results, "eager_se3_exp": eager, "memory": memory,
                        "elapsed_s": elapsed}, f, indent=1)
     return 0
 

@@ -412,10 +412,23 @@ class MatrixLieGroup(abc.ABC):
             t: scalar or array; it broadcasts numpy-style against the batch axes (unbatched
                 endpoints with ``t`` of shape (K,) give K poses; an outer product is
                 ``t[:, None]``). Values outside [0, 1] extrapolate along the same curve.
+
+        Memory: when ``self``, ``other`` and ``t`` share one batch shape of at least 2^19
+        elements, CPU evaluates it in 2^16-element chunks, so the temporaries are a few MB
+        instead of a multiple of the output (SE3, 2^22 elements: 5 MB against 268 MB).
         """
+        from ._batch import in_chunks
         from ._geodesic import geodesic
 
-        return geodesic(self, other)(t)
+        def path(a: Self, b: Self, t: Any) -> Self:
+            return geodesic(a, b)(t)
+
+        batch = self.get_batch_axes()
+        if type(other) is type(self) and other.get_batch_axes() == batch and jnp.shape(t) == batch:
+            where = f"{type(self).__name__} geodesic"
+            t = as_float_array(t, "t", (), where, like=self.parameters())
+            return in_chunks(path, batch, self, other, t)
+        return path(self, other, t)
 
     # -- batch handling -------------------------------------------------------------
 

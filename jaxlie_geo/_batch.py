@@ -1,9 +1,12 @@
-"""Stacking group elements along a new batch axis."""
+"""Batch handling: stacking group elements along a new axis, and evaluating a large batch
+in chunks."""
 
 from __future__ import annotations
 
-from typing import Sequence, TypeVar
+import math
+from typing import Any, Callable, Sequence, Tuple, TypeVar
 
+import jax
 import jax.numpy as jnp
 
 from ._base import MatrixLieGroup
@@ -25,3 +28,68 @@ def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
         raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
     axis = axis % ndim
     return G(jnp.stack([e.parameters() for e in elements], axis=axis))
+
+
+CHUNK = 2**16
+"""Elements per chunk in ``in_chunks``."""
+CHUNKED_FROM = 2**19
+"""Smallest batch ``in_chunks`` splits; below it the batch is evaluated whole."""
+
+
+def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
+    """``f(*args)``, evaluated ``CHUNK`` elements at a time into one output buffer on CPU
+    when the batch has at least ``CHUNKED_FROM`` elements; otherwise, on other backends and
+    for derivatives, evaluated whole.
+
+    Every leaf of ``args`` (group elements, arrays) must have leading axes ``batch``, and
+    ``f`` must act element by element along them. Why: a whole-batch kernel keeps its
+    intermediates as whole-batch arrays, out of cache. SE3 ``interpolate`` at 2^22
+    elements (float32) held 268 MB of temporaries, 2.3x its 117 MB output; in chunks, 5 MB.
+    Measured on the 2-core VM, whole → chunked, ns/element: interpolate 82 → 59 at 2^22 and
+    79 → 53 at 2^19 (at 4·10^5 whole batches were faster, 47 against 55); SE3 exp at 10^6
+    39 → 29 (float32), 76 → 55 (float64). Ops whose kernels keep few temporaries got slower
+    in chunks (SE3 log 10 → 99, compose 9.6 → 12.9, SO3 exp 10 → 13: the loop's last
+    fusion, writing into the output, runs on one thread), so only those two use it.
+
+    The last chunk is shifted back to end at the batch's end (it recomputes part of its
+    predecessor rather than padding, which would copy every input). Derivatives (a custom
+    JVP) differentiate the whole-batch ``f``: through the chunk loop, SE3's gradient at
+    10^6 took 720 ns/element against 424. GPUs are left whole: a loop there syncs with the
+    host every iteration, and it is not measured.
+    """
+    n = math.prod(batch)
+    if n < CHUNKED_FROM:
+        return f(*args)
+    flat = [x.reshape((n,) + x.shape[len(batch) :]) for x in jax.tree_util.tree_leaves(args)]
+    treedef = jax.tree_util.tree_structure(args)
+
+    def whole(*leaves: jax.Array) -> Any:
+        return f(*jax.tree_util.tree_unflatten(treedef, leaves))
+
+    def piece(start: Any, leaves: Sequence[jax.Array]) -> Any:
+        return whole(*(jax.lax.dynamic_slice_in_dim(x, start, CHUNK) for x in leaves))
+
+    def chunked(*leaves: jax.Array) -> Any:
+        shapes = jax.eval_shape(piece, 0, leaves)
+        out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
+
+        def body(i: Any, out: Any) -> Any:
+            start = jnp.minimum(i * CHUNK, n - CHUNK)
+            return jax.tree_util.tree_map(
+                lambda o, p: jax.lax.dynamic_update_slice_in_dim(o, p, start, 0),
+                out,
+                piece(start, leaves),
+            )
+
+        return jax.lax.fori_loop(0, -(-n // CHUNK), body, out)
+
+    @jax.custom_jvp
+    def evaluate(*leaves: jax.Array) -> Any:
+        return jax.lax.platform_dependent(*leaves, cpu=chunked, default=whole)
+
+    @evaluate.defjvp
+    def _(primals, tangents):  # type: ignore[no-untyped-def]
+        return jax.jvp(whole, primals, tangents)
+
+    out = evaluate(*flat)
+    return jax.tree_util.tree_map(lambda o: o.reshape(batch + o.shape[1:]), out)
