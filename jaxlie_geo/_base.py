@@ -236,6 +236,8 @@ class MatrixLieGroup(abc.ABC):
     """Dimension k of the tangent space (the Lie algebra)."""
     space_dim: ClassVar[int]
     """Dimension of the points the group acts on."""
+    _interpolate_in_chunks: ClassVar[bool] = True
+    """Whether large ``interpolate`` batches run in chunks (``_batch.in_chunks``)."""
 
     # -- construction ---------------------------------------------------------------
 
@@ -415,7 +417,8 @@ class MatrixLieGroup(abc.ABC):
 
         Memory: when ``self``, ``other`` and ``t`` share one batch shape of at least 2^19
         elements, CPU evaluates it in 2^16-element chunks, so the temporaries are a few MB
-        instead of a multiple of the output (SE3, 2^22 elements: 5 MB against 268 MB).
+        instead of a multiple of the output (SE3, 2^22 elements: 5 MB against 268 MB; SO2,
+        whose whole-batch kernel has no temporaries, is not chunked).
         """
         from ._batch import in_chunks
         from ._geodesic import geodesic
@@ -424,7 +427,8 @@ class MatrixLieGroup(abc.ABC):
             return geodesic(a, b)(t)
 
         batch = self.get_batch_axes()
-        if type(other) is type(self) and other.get_batch_axes() == batch and jnp.shape(t) == batch:
+        same = type(other) is type(self) and other.get_batch_axes() == batch
+        if self._interpolate_in_chunks and same and jnp.shape(t) == batch:
             where = f"{type(self).__name__} geodesic"
             t = as_float_array(t, "t", (), where, like=self.parameters())
             return in_chunks(path, batch, self, other, t)

@@ -27,6 +27,9 @@ class SO2(SOBase):
     parameters_dim = 2
     tangent_dim = 1
     space_dim = 2
+    # Its interpolate fuses into one kernel with no temporaries; chunks would only add the
+    # loop (10^6 elements, 2-core VM: 39 -> 61 ns/element float32, 43 -> 87 float64).
+    _interpolate_in_chunks = False
 
     # -- factories ------------------------------------------------------------------
 

@@ -507,7 +507,7 @@ def _chunked_ops():
     """The operations that run large batches in chunks (``_batch.in_chunks``): f(params,
     other params, t) and its arguments' shapes."""
     ops = [(G, "interpolate", lambda p, q, t, G=G: G(p).interpolate(G(q), t).parameters())
-           for G in GROUPS]
+           for G in GROUPS if G._interpolate_in_chunks]
     ops.append((SE3, "exp", lambda p, q, t: SE3.exp(SE3(p).log() * t[..., None]).parameters()))
     return ops
 
