@@ -63,6 +63,7 @@ def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
     flat = [x.reshape((n,) + x.shape[len(batch) :]) for x in jax.tree_util.tree_leaves(args)]
     treedef = jax.tree_util.tree_structure(args)
 
+    @jax.jit  # traced once per shape: eval_shape and the loop body share the trace
     def whole(*leaves: jax.Array) -> Any:
         return f(*jax.tree_util.tree_unflatten(treedef, leaves))
 
