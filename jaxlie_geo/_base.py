@@ -415,10 +415,11 @@ class MatrixLieGroup(abc.ABC):
                 endpoints with ``t`` of shape (K,) give K poses; an outer product is
                 ``t[:, None]``). Values outside [0, 1] extrapolate along the same curve.
 
-        Memory: when ``self``, ``other`` and ``t`` share one batch shape of at least 2^19
-        elements, CPU evaluates it in 2^16-element chunks, so the temporaries are a few MB
-        instead of a multiple of the output (SE3, 2^22 elements: 5 MB against 268 MB; SO2,
-        whose whole-batch kernel has no temporaries, is not chunked).
+        Memory: when ``self`` and ``other`` share one batch shape of at least 2^19 elements
+        and ``t`` broadcasts to it (a scalar ``t`` does), CPU evaluates it in 2^16-element
+        chunks, so the temporaries are a few MB instead of a multiple of the output (SE3,
+        2^22 elements: 5 MB against 268 MB; SO2, whose whole-batch kernel has no
+        temporaries, is not chunked).
         """
         from ._batch import in_chunks
         from ._geodesic import geodesic
@@ -428,9 +429,13 @@ class MatrixLieGroup(abc.ABC):
 
         batch = self.get_batch_axes()
         same = type(other) is type(self) and other.get_batch_axes() == batch
-        if self._interpolate_in_chunks and same and jnp.shape(t) == batch:
+        t_shape = jnp.shape(t)
+        t_fits = len(t_shape) <= len(batch) and all(
+            a in (1, b) for a, b in zip(t_shape[::-1], batch[::-1]))
+        if self._interpolate_in_chunks and same and t_fits:
             where = f"{type(self).__name__} geodesic"
-            t = as_float_array(t, "t", (), where, like=self.parameters())
+            like = jnp.zeros((), jnp.result_type(self.parameters(), other.parameters()))
+            t = jnp.broadcast_to(as_float_array(t, "t", (), where, like=like), batch)
             return in_chunks(path, batch, self, other, t)
         return path(self, other, t)
 

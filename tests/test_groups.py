@@ -491,12 +491,15 @@ def test_indexing_reshape_stack(G, dtype, seed):
 
 @pytest.fixture
 def small_chunks(monkeypatch):
-    """``in_chunks`` with 64-element chunks from 128 elements on, so that a test-sized
-    batch takes the chunked path (jit caches cleared: the sizes are read at trace time)."""
+    """``in_chunks`` with 256-element chunks from 512 elements on, so that a test-sized
+    batch takes the chunked path, with chunks large enough for ``_so3.by_angle`` to choose
+    its kernel per chunk (jit caches cleared: the sizes are read at trace time)."""
     from jaxlie_geo import _batch
+    from jaxlie_geo import _so3
 
-    monkeypatch.setattr(_batch, "CHUNK", 64)
-    monkeypatch.setattr(_batch, "CHUNKED_FROM", 128)
+    assert _so3._BY_ANGLE_MIN_BATCH <= 256
+    monkeypatch.setattr(_batch, "CHUNK", 256)
+    monkeypatch.setattr(_batch, "CHUNKED_FROM", 512)
     jax.clear_caches()
     yield
     monkeypatch.undo()
@@ -515,21 +518,24 @@ def _chunked_ops():
 @pytest.mark.parametrize(("G", "op", "f"), _chunked_ops(), ids=lambda x: getattr(x, "__name__", x))
 @pytest.mark.parametrize("dtype", [np.float32, np.float64], ids=["float32", "float64"])
 def test_in_chunks_equals_whole_batch(G, op, f, dtype, small_chunks):
-    """A large batch runs chunk by chunk (a loop in the compiled program); values,
-    gradients (taken whole, by design) and vmap agree with the whole-batch path within a
-    few ulp. The batch, 7 × 143, is not a multiple of the chunk, so the last chunk overlaps
-    its predecessor."""
+    """A large batch runs chunk by chunk (a loop in the compiled program); values, vmap
+    and gradients (taken whole, by design: no loop) agree with the whole-batch path within
+    a few ulp. The batch, 7 × 143, is not a multiple of the chunk, so the last chunk
+    overlaps its predecessor. Rotation angles t·θ exceed √10 only in the first chunk, so
+    the whole batch takes the compensated SO(3) kernel and the later chunks the plain one."""
     from jaxlie_geo import _batch
 
     batch = (7, 143)
     T, U = random_element(G, 0, batch, dtype), random_element(G, 1, batch, dtype)
-    t = np.random.default_rng(2).uniform(-0.5, 1.5, batch).astype(dtype)
+    t = np.random.default_rng(2).uniform(-0.5, 0.9, batch).astype(dtype)
+    t[0, :5] = 1.5
 
     def loss(p, q, t):
         return jnp.sum(jnp.sin(f(p, q, t)))
 
     args = (T.parameters(), U.parameters(), jnp.asarray(t))
     assert "while" in jax.jit(f).lower(*args).as_text()
+    assert "while" not in jax.jit(jax.grad(loss)).lower(*args).as_text()
     got, grads = f(*args), jax.grad(loss, argnums=(0, 1, 2))(*args)
     stacked = jax.vmap(f)(*(jnp.stack([a, a[::-1]]) for a in args))
     _batch.CHUNKED_FROM = 2**19
@@ -552,11 +558,12 @@ def test_interpolate_memory_at_2_22_elements():
         pytest.skip("interpolate chunks its batch on CPU only")
     n = 2**22
     spec = jax.ShapeDtypeStruct((n, 7), jnp.float32)
-    compiled = jax.jit(lambda a, b, t: SE3(a).interpolate(SE3(b), t).parameters()).lower(
-        spec, spec, jax.ShapeDtypeStruct((n,), jnp.float32)).compile()
-    memory = compiled.memory_analysis()
-    assert memory.output_size_in_bytes == n * 7 * 4
-    assert memory.temp_size_in_bytes <= memory.output_size_in_bytes
+    for t in (jax.ShapeDtypeStruct((n,), jnp.float32), jax.ShapeDtypeStruct((), jnp.float32)):
+        compiled = jax.jit(lambda a, b, t: SE3(a).interpolate(SE3(b), t).parameters()).lower(
+            spec, spec, t).compile()
+        memory = compiled.memory_analysis()
+        assert memory.output_size_in_bytes == n * 7 * 4
+        assert memory.temp_size_in_bytes <= memory.output_size_in_bytes, t.shape
 
 
 @over_groups_dtypes
