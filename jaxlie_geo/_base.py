@@ -20,7 +20,18 @@ import abc
 import dataclasses
 import functools
 import inspect
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, Sequence, Tuple, TypeVar, Union, overload
+from typing import (
+    TYPE_CHECKING,
+    Any,
+    ClassVar,
+    Generic,
+    Iterator,
+    Sequence,
+    Tuple,
+    TypeVar,
+    Union,
+    overload,
+)
 
 import jax
 import jax.numpy as jnp
@@ -442,10 +453,38 @@ class MatrixLieGroup(abc.ABC):
     # -- batch handling -------------------------------------------------------------
 
     def __getitem__(self, index: Any) -> Self:
-        """Index the batch axes: ``T[0]``, ``T[:, 1]``, ``T[mask]``, ``T[..., None]``."""
+        """Index the batch axes: ``T[0]``, ``T[:, 1]``, ``T[mask]``, ``T[..., None]``. A static
+        integer out of range raises ``IndexError``, as in NumPy (JAX would clamp it, and
+        Python's iteration fallback relies on the error); traced indices clamp, as in JAX."""
         p = jnp.moveaxis(self.parameters(), -1, 0)
         index = index if isinstance(index, tuple) else (index,)
+        batch, axis = self.get_batch_axes(), 0
+        for i in index:  # the leading static integers and slices; arrays and ... end it
+            if i is None:
+                continue
+            if isinstance(i, (int, onp.integer)) and not isinstance(i, bool):
+                if axis >= len(batch) or not -batch[axis] <= i < batch[axis]:
+                    raise IndexError(
+                        f"{type(self).__name__}: index {i} is out of range for batch axes "
+                        f"{batch} (axis {axis})."
+                    )
+            elif not isinstance(i, slice):
+                break
+            axis += 1
         return type(self)(jnp.moveaxis(p[(slice(None), *index)], 0, -1))
+
+    def __iter__(self) -> Iterator[Self]:
+        """Iterate over the first batch axis (``a, b = T`` for a batch of 2); an unbatched
+        element is not iterable (``TypeError``)."""
+        if not self.get_batch_axes():
+            raise TypeError(f"iteration over an unbatched {type(self).__name__}.")
+        for i in range(len(self)):
+            yield self[i]
+
+    def __bool__(self) -> bool:
+        """Always true, as for jaxlie's elements (without it, ``bool`` would fall back to
+        ``len``, which an unbatched element does not have)."""
+        return True
 
     def reshape(self, *shape: Union[int, Sequence[int]]) -> Self:
         """Reshape the batch axes: ``T.reshape(2, 3)`` or ``T.reshape((2, 3))``."""

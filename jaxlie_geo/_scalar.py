@@ -173,8 +173,11 @@ def _switched(
 
 
 def _split(a: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """Dekker's split a = hi + lo, each half the mantissa (exact without FMA)."""
-    bits = 12 if a.dtype == jnp.float32 else 27
+    """Dekker's split a = hi + lo, each half the mantissa (exact without FMA). The splitter
+    is 2^⌈p/2⌉ + 1 for a p-bit significand: 12 bits for float32, 27 for float64, 6 for
+    float16, 4 for bfloat16 (float64's 2^27 + 1 overflows float16 to inf, and the sums
+    built on it turned NaN)."""
+    bits = (jnp.finfo(a.dtype).nmant + 2) // 2
     c = (2.0**bits + 1.0) * a
     hi = c - (c - a)
     return hi, a - hi
@@ -444,7 +447,10 @@ def atan2_over(n2: jax.Array, w: jax.Array) -> jax.Array:
 
     with A(s) = atan(√s)/√s = Σ (−1)ᵏ sᵏ/(2k+1) summed as a polynomial (s ≤ 0.172).
     No branch, no √n2: values and derivatives of every order are smooth and accurate
-    from n = 0 (the identity) to w = 0 (θ = π) inclusive, for any quaternion norm."""
+    from n = 0 (the identity) to w = 0 (θ = π) inclusive, for any quaternion norm whose
+    square is a normal float: about 1e-19 < ‖q‖ < 1e19 in float32 (1e-154…1e154 in float64).
+    Below, the squares underflow (flush to zero) while w does not, and the angle is wrong;
+    above, they overflow to NaN. (A rotation's quaternion has ‖q‖ ≈ 1.)"""
     wr = w + jnp.sqrt(n2 + w * w)
     inv = 1.0 / (wr + jnp.sqrt(wr * wr + n2))  # 1/((w + r)(1 + √(1 + u²)))
     return 4.0 * _horner("atan", n2 * inv * inv, _ATAN_X_MAX) * inv

@@ -155,6 +155,22 @@ def test_exp_of_log_special_elements(G, dtype):
     assert np.all(rotation_angle(G, x) <= np.pi * (1 + 4 * float(jnp.finfo(dtype).eps)))
 
 
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=lambda d: jnp.dtype(d).name)
+def test_log_is_scale_invariant_over_the_documented_norms(dtype):
+    # _scalar.atan2_over: any norm whose square is a normal float (1e-19..1e19 in float32).
+    # The rotation, and so the log, depends on q's direction only; SE3.log's translation
+    # part once carried a stray 1/‖q‖ (exp(log T) off by 0.5 at ‖q‖ = 2).
+    big = 1e18 if dtype == jnp.float32 else 1e150
+    q = np.array([[0.6, 0.8, 0.0, 0.0], [0.0, 0.0, 0.6, -0.8], [1.0, 0.0, 0.0, 0.0]], dtype)
+    q = np.concatenate([q, to_np(SO3.exp(np.array([[0.3, -0.5, 0.9]], dtype)).wxyz)])
+    t = np.array([[1.0, -2.0, 0.5]] * 4, dtype)
+    so3, se3 = to_np(SO3(q).log()), to_np(SE3(np.concatenate([q, t], -1)).log())
+    for scale in (1.0 / big, 1e-3, 0.5, 1.001, 2.0, 1e3, big):
+        assert_close(SO3(q * scale).log(), so3, dtype)
+        if 1e-3 <= scale <= 1e3:
+            assert_close(SE3(np.concatenate([q * scale, t], -1)).log(), se3, dtype)
+
+
 @pytest.mark.parametrize("G", [SO3, SE3], ids=lambda G: G.__name__)
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=lambda d: jnp.dtype(d).name)
 @given(seed=seeds)
@@ -487,6 +503,45 @@ def test_indexing_reshape_stack(G, dtype, seed):
     np.testing.assert_array_equal(to_np(Su.parameters()), p[[0, 1, 0], [0, 1, 3]])
     # an indexed element behaves like the element itself
     assert_close(T[1, 2].log(), to_np(T.log())[1, 2], dtype)
+
+
+
+@over_groups
+def test_iteration_truthiness_and_static_index_range(G):
+    T = random_element(G, 3, (3, 2), np.float32)
+    p = to_np(T.parameters())
+    parts = list(T)  # over the first batch axis; before, iteration never ended
+    assert len(parts) == 3 and all(type(e) is G and e.get_batch_axes() == (2,) for e in parts)
+    for i, e in enumerate(parts):
+        np.testing.assert_array_equal(to_np(e.parameters()), p[i])
+    a, b, c = T
+    np.testing.assert_array_equal(to_np(c.parameters()), p[2])
+    with pytest.raises(TypeError, match="unbatched"):
+        list(T[0, 0])
+    assert bool(T) and bool(G.identity())  # jaxlie's elements are always true
+    # static integers out of range raise, as in NumPy (JAX alone would clamp to the end)
+    for index in (3, -4, (0, 2), (slice(None), -3), (None, 5)):
+        with pytest.raises(IndexError, match="out of range"):
+            T[index]
+    np.testing.assert_array_equal(to_np(T[-3, -2].parameters()), p[0, 0])
+    np.testing.assert_array_equal(to_np(T[None, 2].parameters()), p[None, 2])
+
+
+@pytest.mark.parametrize("G", [SO3, SE3], ids=["SO3", "SE3"])
+@pytest.mark.parametrize("dtype", [jnp.float16, jnp.bfloat16], ids=["float16", "bfloat16"])
+def test_half_precision_exp_is_finite_and_close(G, dtype):
+    # A small batch takes the compensated kernel, whose error-free splits once assumed a
+    # float64 splitter for every non-float32 dtype: 2^27 + 1 is inf in float16 (all NaN).
+    x = random_tangent(G, 5, (6,), np.float32)
+    x[0] = 0.0
+    x[1, -3:] = [0.0, 0.0, 12.0]  # beyond √10: compensated θ² in any batch size
+    got = G.exp(jnp.asarray(x, dtype)).parameters()
+    assert got.dtype == dtype
+    x_rounded = np.asarray(jnp.asarray(x, dtype).astype(jnp.float32))
+    ref = to_np(G.exp(x_rounded).parameters())
+    eps = float(jnp.finfo(dtype).eps)
+    scale = np.maximum(1.0, np.abs(ref))
+    assert np.all(np.abs(to_np(got.astype(jnp.float32)) - ref) <= 4 * eps * scale)
 
 
 @pytest.fixture

@@ -122,6 +122,7 @@ def test_core_operations_side_by_side(G, dtype):
     same(T.as_matrix(), TR.as_matrix(), "as_matrix")
     M = to_np(U.as_matrix()).astype(dtype)
     same(G.from_matrix(M).as_matrix(), R.from_matrix(M).as_matrix(), "from_matrix")
+    same(G.from_matrix(M).parameters(), R.from_matrix(M).parameters(), "from_matrix sign")
     same(T.apply(p), TR.apply(p), "apply")
     same(T @ p, TR @ p, "@ points")
     same((T @ U).parameters(), (TR @ UR).parameters(), "multiply")
@@ -249,6 +250,24 @@ def test_quaternion_sign_is_kept(G):
     assert float(G.exp(x).parameters()[0]) < 0
 
 
+@over_dtypes
+def test_from_matrix_picks_jaxlies_quaternion_sign(dtype):
+    # Shepperd's pivot (largest of 4w², 4x², 4y², 4z²) and jaxlie's branches on the diagonal
+    # chose opposite signs for 2.8% of random rotations; near-ties included here.
+    q = np.random.default_rng(11).normal(size=(20000, 4))
+    q[:2000, 0] = 0.0  # angle π: w = 0
+    q[2000:4000, 1:] *= 1e-4  # near the identity
+    M = to_np(jaxlie_geo.SO3(jnp.asarray(q / np.linalg.norm(q, axis=-1, keepdims=True), dtype)).as_matrix())
+    ours = to_np(jaxlie_geo.SO3.from_matrix(M).wxyz)
+    ref = to_np(jaxlie_ref.SO3.from_matrix(jnp.asarray(M)).wxyz)
+    sign = np.sign(np.sum(ours * ref, axis=-1))
+    assert np.all(sign > 0), f"{np.sum(sign <= 0)} of {len(sign)} signs differ"
+    H = np.broadcast_to(np.eye(4, dtype=dtype), (20000, 4, 4)).copy()
+    H[:, :3, :3] = M
+    se3 = to_np(jaxlie_geo.SE3.from_matrix(H).wxyz_xyz)[:, :4]
+    np.testing.assert_allclose(se3, ours, rtol=0, atol=4 * np.finfo(dtype).eps)
+
+
 # ---------------------------------------------------------------------------------
 # Tangent orderings.
 
@@ -371,6 +390,16 @@ def test_manifold_side_by_side(dtype):
          "rplus")
     same(jaxlie_geo.manifold.normalize_all(ours), jaxlie_ref.manifold.normalize_all(ref),
          "normalize_all")
+    # The documented difference: on array leaves rminus is b − a (jaxlie: a − b), so that
+    # rplus(a, rminus(a, b)) = b for array and group leaves alike.
+    a = {"x": np.array([1.0, 3.0], dtype), "T": ours["pose"]}
+    b = {"x": np.array([0.5, -1.0], dtype), "T": ours_b["pose"]}
+    d = jaxlie_geo.manifold.rminus(a, b)
+    np.testing.assert_array_equal(to_np(d["x"]), b["x"] - a["x"])
+    np.testing.assert_array_equal(to_np(jaxlie_ref.manifold.rminus(a["x"], b["x"])), a["x"] - b["x"])
+    back = jaxlie_geo.manifold.rplus(a, d)
+    np.testing.assert_array_equal(to_np(back["x"]), b["x"])
+    assert_close_compat(back["T"].as_matrix(), b["T"].as_matrix(), dtype, msg="rplus(rminus)")
     for T, TR in ((ours["pose"], ref["pose"]), (ours["rot"][0], ref["rot"][0]),
                   (ours["planar"][1], ref["planar"][1])):
         assert_close_compat(
