@@ -120,7 +120,9 @@ def mean(
         poses: elements with batch ``(N, *rest)``; the mean is taken over the N axis.
         weights: shape ``(N,)``, non-negative; normalised to sum 1 (default: uniform).
         init: starting point, batch ``rest`` (default: ``poses[0]``).
-        tol: stop once the update's norm is below it (default: 10·eps of the dtype).
+        tol: stop once every element's update is below it, largest component (default:
+            10·eps of the dtype); a positive Python number. Elements whose update is NaN
+            (NaN among their poses) do not hold the others back; their mean is NaN.
         max_iters: cap on the iterations (jit-able ``lax.while_loop``).
     Returns:
         The mean, batch ``rest``. Meaningful when the poses lie within a ball where
@@ -130,6 +132,8 @@ def mean(
     n = poses.get_batch_axes()[0] if poses.get_batch_axes() else None
     if n is None:
         raise ValueError("mean: `poses` must have at least one batch axis (the one averaged).")
+    if n == 0:
+        raise ValueError("mean: `poses` is empty along its first batch axis.")
     dtype = poses.parameters().dtype
     if weights is None:
         w = jnp.full((n,), 1.0 / n, dtype)
@@ -138,14 +142,19 @@ def mean(
         if w.shape != (n,):
             raise ValueError(f"mean: `weights` must have shape ({n},), got {w.shape}.")
         w = w / jnp.sum(w)
-    tol_ = float(10 * jnp.finfo(dtype).eps) if tol is None else tol
+    tol_ = float(10 * jnp.finfo(dtype).eps) if tol is None else float(tol)
+    if not tol_ > 0 or tol_ == float("inf"):
+        raise ValueError(f"mean: `tol` must be a positive finite number, got {tol}.")
     mu0 = poses[0] if init is None else init
     extra = (1,) * (poses.parameters().ndim - 2)
 
     def step(mu: GroupT) -> Tuple[GroupT, jax.Array]:
         r = mu.inverse()[None].multiply(poses).log()  # (N, *rest, k)
         delta = jnp.sum(w.reshape((n, *extra, 1)) * r, axis=0)
-        return mu.multiply(G.exp(delta)), jnp.max(jnp.abs(delta))
+        # NaN updates are left out of the stopping test (a NaN compares false, and one
+        # element's NaN would otherwise stop every other element after one step).
+        size = jnp.where(jnp.isnan(delta), 0.0, jnp.abs(delta))
+        return mu.multiply(G.exp(delta)), jnp.max(size)
 
     def cond(state: Tuple[Any, jax.Array, jax.Array]) -> jax.Array:
         _, size, i = state

@@ -156,6 +156,27 @@ def test_mean_weights_batches_and_errors():
         uncertainty.mean(SO3.identity())
     with pytest.raises(ValueError, match=r"weights.*\(2,\)"):
         uncertainty.mean(xs, weights=np.ones(3))
+    with pytest.raises(ValueError, match="empty"):
+        uncertainty.mean(SE3.identity((0, 3)))
+    for tol in (0.0, -1e-6, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="tol"):
+            uncertainty.mean(xs, tol=tol)
+
+
+def test_mean_ignores_a_nan_element_in_the_stopping_test():
+    # batch (5, 2): two means of five; a NaN among the poses of the second must not stop
+    # the iteration of the first (a NaN update compares false against tol).
+    x = np.random.default_rng(4).normal(size=(5, 2, 6)) * 0.3
+    poses = SE3.exp(x)
+    clean = uncertainty.mean(poses)
+    p = np.array(poses.parameters())
+    p[2, 1, 0] = np.nan
+    got = uncertainty.mean(SE3(jnp.asarray(p)))
+    np.testing.assert_allclose(to_np(got.parameters()[0]), to_np(clean.parameters()[0]), atol=1e-12)
+    assert np.all(np.isnan(to_np(got.parameters()[1])))
+    # the clean column is the fixed point: its update is below the default tolerance
+    r = (got[0].inverse()[None] @ poses[:, 0]).log()
+    assert np.max(np.abs(to_np(jnp.mean(r, axis=0)))) < 1e-12
 
 
 @over_groups
