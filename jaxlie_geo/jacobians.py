@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as onp
 
 from . import hints
-from ._base import MatrixLieGroup, SEBase, jit_function
+from ._base import MatrixLieGroup, SEBase, as_float_array, jit_function
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
@@ -143,7 +143,7 @@ def generator_action(G: type, points: hints.Array) -> jax.Array:
     (p̃ = (p, 1) for SE groups): e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3). Entry (i, j)
     is Σ_l hat(e_j)[i, l] p̃_l, written out from the constant generators."""
     n, d = G.matrix_dim, G.space_dim
-    p = jnp.asarray(points)
+    p = as_float_array(points, "points", (d,), "jacobians.generator_action")
     coords = [p[..., l] for l in range(d)]
     if n > d:  # homogeneous coordinates
         coords.append(jnp.ones_like(coords[0]))

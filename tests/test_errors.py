@@ -97,6 +97,21 @@ def test_wrong_trailing_shape_raises_at_trace_time(fn, bad, trailing, name):
 
 
 @over_groups
+def test_generator_action_checks_points(G):
+    from jaxlie_geo import jacobians
+
+    assert jacobians.generator_action(G, np.ones((4, G.space_dim))).shape == (
+        4,
+        G.space_dim,
+        G.tangent_dim,
+    )
+    with pytest.raises(ValueError, match=r"generator_action: `points` must have shape"):
+        jacobians.generator_action(G, np.ones(G.space_dim + 1))
+    with pytest.raises(ValueError, match="must be real"):
+        jacobians.generator_action(G, np.ones(G.space_dim) * 1j)
+
+
+@over_groups
 def test_constructor_does_not_validate(G):
     # JAX rebuilds pytrees with arbitrary leaves (shapes, axis specs, tracers, None).
     for leaf in (np.zeros(G.parameters_dim + 3), 0, None, (2, 3), jax.ShapeDtypeStruct((1,), jnp.float32)):
