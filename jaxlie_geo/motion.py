@@ -120,17 +120,21 @@ def arc(start: SE2, velocity: hints.Array) -> Arc:
     u = jnp.broadcast_to(u, (*batch, 2))
     p0 = jnp.broadcast_to(p0.astype(u.dtype), (*batch, 2))
     omega = jnp.broadcast_to(omega, batch)
-    speed = jnp.sqrt(jnp.sum(u * u, axis=-1))
+    # At zero speed the square root and atan2 are not differentiable; their inputs are
+    # swapped for harmless values there, so gradients are 0 there instead of NaN.
+    n2 = jnp.sum(u * u, axis=-1)
+    moving = n2 > 0
     turning = omega != 0
-    moving = speed > 0
+    safe_speed = jnp.sqrt(jnp.where(moving, n2, 1.0))
+    speed = jnp.where(moving, safe_speed, 0.0)
     safe_omega = jnp.where(turning, omega, 1.0)
-    safe_speed = jnp.where(moving, speed, 1.0)
+    safe_u = jnp.where(moving[..., None], u, jnp.ones_like(u))
     curvature = jnp.where(
         moving, omega / safe_speed, jnp.where(turning, jnp.sign(omega) * jnp.inf, 0.0)
     )
     Ju = jnp.stack([-u[..., 1], u[..., 0]], axis=-1)
     centre = jnp.where(turning[..., None], p0 + Ju / safe_omega[..., None], p0)
-    heading = jnp.where(moving, jnp.arctan2(u[..., 1], u[..., 0]), 0.0)
+    heading = jnp.where(moving, jnp.arctan2(safe_u[..., 1], safe_u[..., 0]), 0.0)
     return Arc(
         start=p0,
         heading=heading,

@@ -472,6 +472,13 @@ def test_arc_straight_line_and_turning_on_the_spot():
     arc = motion.arc(start, jnp.zeros(3))
     assert float(arc.curvature) == 0.0 and float(arc.heading) == 0.0
     np.testing.assert_array_equal(np.asarray(arc.centre), [1.0, -2.0])
+    # Gradients at zero speed are 0 (the subgradient), not NaN from √0 and atan2(0, 0).
+    for v in (jnp.zeros(3), jnp.array([0.0, 0.0, 0.7])):
+        for field in ("speed", "heading", "curvature"):
+            g = jax.grad(lambda v: getattr(motion.arc(start, v), field))(v)
+            np.testing.assert_array_equal(np.asarray(g), 0.0)
+    g = jax.grad(lambda v: motion.arc(start, v).speed)(jnp.array([0.3, 0.4, 0.0]))
+    np.testing.assert_allclose(np.asarray(g), [0.6, 0.8, 0.0], atol=1e-15)
     # Batched, mixed cases in one call (the where-guards must not leak NaN).
     xis = jnp.array([[1.0, 0.0, 0.0], [0.0, 0.0, 2.0], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
     arcs = motion.arc(start, xis)
