@@ -63,9 +63,9 @@ def value_and_grad(
     has_aux: bool = False,
     holomorphic: bool = False,
     allow_int: bool = False,
-    **kwargs: Any,
+    reduce_axes: Sequence[Any] = (),
 ) -> Callable:
-    """Like ``jax.value_and_grad``, but gradients of group arguments are taken with
+    """Like ``jax.value_and_grad`` (same parameters, in jaxlie's positional order), but gradients of group arguments are taken with
     respect to a right perturbation δ in the tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0."""
 
     def wrapped(*args: Any, **fkwargs: Any) -> Any:
@@ -82,7 +82,7 @@ def value_and_grad(
             has_aux=has_aux,
             holomorphic=holomorphic,
             allow_int=allow_int,
-            **kwargs,
+            reduce_axes=reduce_axes,
         )(*zeros, **kzeros)
 
     return wrapped
@@ -94,11 +94,11 @@ def grad(
     has_aux: bool = False,
     holomorphic: bool = False,
     allow_int: bool = False,
-    **kwargs: Any,
+    reduce_axes: Sequence[Any] = (),
 ) -> Callable:
     """Like ``jax.grad``, with tangent-space gradients for group arguments
     (see ``value_and_grad``)."""
-    vg = value_and_grad(fun, argnums, has_aux, holomorphic, allow_int, **kwargs)
+    vg = value_and_grad(fun, argnums, has_aux, holomorphic, allow_int, reduce_axes)
 
     def wrapped(*args: Any, **fkwargs: Any) -> Any:
         out = vg(*args, **fkwargs)
