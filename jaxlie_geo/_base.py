@@ -169,6 +169,30 @@ def _inherited_doc(cls: type, name: str) -> Any:
     return None
 
 
+def _checking_elements(fn: Any, where: str) -> Any:
+    """``fn`` preceded by a check of the group elements among its arguments (``self``,
+    ``other``): parameters of shape ``(*batch, parameters_dim)``. Constructors cannot check
+    (JAX rebuilds pytrees with shapes, tracers, None, and ``jax.jacfwd`` of a group-valued
+    function returns an element holding a Jacobian), so without this ``SO3(tangent).log()``
+    silently read a 3-vector as a quaternion. Runs at trace time only."""
+
+    @functools.wraps(fn)
+    def checked(*args: Any, **kwargs: Any) -> Any:
+        for a in (*args, *kwargs.values()):
+            if isinstance(a, MatrixLieGroup):
+                p = a.parameters()
+                if getattr(p, "ndim", 1) == 0 or getattr(p, "shape", (a.parameters_dim,))[
+                    -1
+                ] != a.parameters_dim:
+                    raise ValueError(
+                        f"{where}: {type(a).__name__} parameters must have shape "
+                        f"(*batch, {a.parameters_dim}), got shape {tuple(p.shape)}."
+                    )
+        return fn(*args, **kwargs)
+
+    return checked
+
+
 def _jit_public_methods(cls: type) -> None:
     """Wrap every public method of ``cls`` (inherited ones included) in ``jax.jit``.
 
@@ -193,7 +217,8 @@ def _jit_public_methods(cls: type) -> None:
         argnums = tuple(names.index(n) for n in static)
         if kind is classmethod:
             argnums = (0, *argnums)
-        jitted = jax.jit(fn, static_argnums=argnums, static_argnames=static)
+        jitted = jax.jit(_checking_elements(fn, f"{cls.__name__}.{name}"), static_argnums=argnums,
+                         static_argnames=static)  # fmt: skip
         if "batch_axes" in names:
             pos = names.index("batch_axes")
 

@@ -112,6 +112,28 @@ def test_generator_action_checks_points(G):
 
 
 @over_groups
+def test_methods_check_the_elements_parameter_shape(G):
+    # e.g. SO3(tangent) for SO3.exp(tangent): a 3-vector was read as a quaternion.
+    for size in (G.parameters_dim - 1, G.parameters_dim + 1):
+        T = G(np.full((2, size), 0.5, np.float32))
+        for call, name in (
+            (lambda: T.log(), "log"),
+            (lambda: T.inverse(), "inverse"),
+            (lambda: T.as_matrix(), "as_matrix"),
+            (lambda: T.adjoint(), "adjoint"),
+            (lambda: T.apply(np.ones(G.space_dim, np.float32)), "apply"),
+            (lambda: G.identity().multiply(T), "multiply"),
+            (lambda: T @ G.identity(), "multiply"),
+            (lambda: jax.jit(lambda p: G(p).log())(T.parameters()), "log"),
+        ):
+            msg = rf"{G.__name__}\.{name}: {G.__name__} parameters must have shape \(\*batch, {G.parameters_dim}\), got shape \(2, {size}\)"
+            with pytest.raises(ValueError, match=msg):
+                call()
+    with pytest.raises(ValueError, match="got shape \\(\\)"):
+        G(np.float32(1.0)).inverse()
+
+
+@over_groups
 def test_constructor_does_not_validate(G):
     # JAX rebuilds pytrees with arbitrary leaves (shapes, axis specs, tracers, None).
     for leaf in (np.zeros(G.parameters_dim + 3), 0, None, (2, 3), jax.ShapeDtypeStruct((1,), jnp.float32)):
