@@ -179,15 +179,14 @@ def _checking_elements(fn: Any, where: str) -> Any:
     @functools.wraps(fn)
     def checked(*args: Any, **kwargs: Any) -> Any:
         for a in (*args, *kwargs.values()):
-            if isinstance(a, MatrixLieGroup):
-                p = a.parameters()
-                if getattr(p, "ndim", 1) == 0 or getattr(p, "shape", (a.parameters_dim,))[
-                    -1
-                ] != a.parameters_dim:
-                    raise ValueError(
-                        f"{where}: {type(a).__name__} parameters must have shape "
-                        f"(*batch, {a.parameters_dim}), got shape {tuple(p.shape)}."
-                    )
+            if not isinstance(a, MatrixLieGroup):
+                continue
+            shape = getattr(a.parameters(), "shape", None)
+            if shape is not None and tuple(shape[-1:]) != (a.parameters_dim,):
+                raise ValueError(
+                    f"{where}: {type(a).__name__} parameters must have shape "
+                    f"(*batch, {a.parameters_dim}), got shape {tuple(shape)}."
+                )
         return fn(*args, **kwargs)
 
     return checked
@@ -217,8 +216,8 @@ def _jit_public_methods(cls: type) -> None:
         argnums = tuple(names.index(n) for n in static)
         if kind is classmethod:
             argnums = (0, *argnums)
-        jitted = jax.jit(_checking_elements(fn, f"{cls.__name__}.{name}"), static_argnums=argnums,
-                         static_argnames=static)  # fmt: skip
+        checked = _checking_elements(fn, f"{cls.__name__}.{name}")
+        jitted = jax.jit(checked, static_argnums=argnums, static_argnames=static)
         if "batch_axes" in names:
             pos = names.index("batch_axes")
 

@@ -65,8 +65,9 @@ def value_and_grad(
     allow_int: bool = False,
     reduce_axes: Sequence[Any] = (),
 ) -> Callable:
-    """Like ``jax.value_and_grad`` (same parameters, in jaxlie's positional order), but gradients of group arguments are taken with
-    respect to a right perturbation δ in the tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0."""
+    """Like ``jax.value_and_grad`` (same parameters, in jaxlie's positional order), but
+    gradients of group arguments are taken with respect to a right perturbation δ in the
+    tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0."""
 
     def wrapped(*args: Any, **fkwargs: Any) -> Any:
         def tangent_fun(*deltas: Any, **kdeltas: Any) -> Any:
