@@ -505,7 +505,6 @@ def test_indexing_reshape_stack(G, dtype, seed):
     assert_close(T[1, 2].log(), to_np(T.log())[1, 2], dtype)
 
 
-
 @over_groups
 def test_iteration_truthiness_and_static_index_range(G):
     T = random_element(G, 3, (3, 2), np.float32)
