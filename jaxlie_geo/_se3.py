@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array, materialize, pytree_dataclass
+from ._base import SEBase, as_float_array, materialize, matmul, pytree_dataclass
 from ._batch import in_chunks
 from ._so3 import (
     SO3,
@@ -155,7 +155,7 @@ class SE3(SEBase[SO3]):
     def adjoint(self) -> jax.Array:
         """[[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41, permuted)."""
         R = self.rotation().as_matrix()
-        tR = skew(self.translation()) @ R
+        tR = matmul(skew(self.translation()), R)
         zero = jnp.zeros_like(R)
         return jnp.concatenate(
             [jnp.concatenate([R, tR], -1), jnp.concatenate([zero, R], -1)], axis=-2
@@ -168,8 +168,8 @@ class SE3(SEBase[SO3]):
         rho, phi = xi[..., :3], xi[..., 3:]
         x = sq_norm(phi)
         P, Rh = skew(phi), skew(rho)
-        PR, RP = P @ Rh, Rh @ P
-        PRP = PR @ P
+        PR, RP = matmul(P, Rh), matmul(Rh, P)
+        PRP = matmul(PR, P)
         PP = skew_sq(phi)
         a = _scalar.F2(x)[..., None, None]
         b = _scalar.C2(x)[..., None, None]
@@ -177,8 +177,8 @@ class SE3(SEBase[SO3]):
         return (
             -0.5 * Rh
             + a * (PR + RP - PRP)
-            - b * (PP @ Rh + Rh @ PP - 3.0 * PRP)
-            + c * (PRP @ P + P @ PRP)
+            - b * (matmul(PP, Rh) + matmul(Rh, PP) - 3.0 * PRP)
+            + c * (matmul(PRP, P) + matmul(P, PRP))
         )
 
     @staticmethod
@@ -205,8 +205,9 @@ class SE3(SEBase[SO3]):
         """J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]], J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ)
         (block inverse of ``jac_right``, in closed form)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
-        Jinv = jac_right_inv_so3(xi[..., 3:])
-        return cls._blocks(Jinv, -Jinv @ cls._q_block(xi) @ Jinv)
+        # In memory before the products, which read every entry three times over.
+        Jinv, Q = materialize(jac_right_inv_so3(xi[..., 3:]), cls._q_block(xi))
+        return cls._blocks(Jinv, -matmul(matmul(Jinv, Q), Jinv))
 
     @classmethod
     @override

@@ -16,13 +16,13 @@ import jax
 import jax.numpy as jnp
 
 from . import hints, jacobians
-from ._base import MatrixLieGroup, as_float_array, jit_function, resolve_dtype
+from ._base import MatrixLieGroup, as_float_array, jit_function, matmul, resolve_dtype
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
 
 def _sandwich(J: jax.Array, cov: jax.Array) -> jax.Array:
-    return J @ cov @ jnp.swapaxes(J, -1, -2)
+    return matmul(matmul(J, cov), jnp.swapaxes(J, -1, -2))
 
 
 def _check_cov(T: MatrixLieGroup, cov: hints.Array, name: str, where: str) -> jax.Array:
@@ -47,7 +47,7 @@ def propagate_compose(
     out = _sandwich(J_a, cov_a) + _sandwich(J_b, cov_b)
     if cov_ab is not None:
         cov_ab = _check_cov(a, cov_ab, "cov_ab", "propagate_compose")
-        cross = J_a @ cov_ab @ jnp.swapaxes(J_b, -1, -2)
+        cross = matmul(matmul(J_a, cov_ab), jnp.swapaxes(J_b, -1, -2))
         out = out + cross + jnp.swapaxes(cross, -1, -2)
     return out
 
@@ -100,7 +100,7 @@ def _sample(
     L = jnp.linalg.cholesky(cov.astype(dtype))
     batch = jnp.broadcast_shapes(mean.get_batch_axes(), L.shape[:-2])
     z = jax.random.normal(key, (*batch_axes, *batch, G.tangent_dim), dtype=resolve_dtype(dtype))
-    return mean.multiply(G.exp(jnp.einsum("...ij,...j->...i", L, z)))
+    return mean.multiply(G.exp(matmul(L, z[..., None])[..., 0]))
 
 
 @jit_function("tol", "max_iters")
