@@ -20,8 +20,10 @@ exact custom JVP whose one cancelling term is summed from a series.)
 Both branches are evaluated on clamped arguments (the ``jnp.where``-safe pattern), so
 no NaN or inf from the unused branch reaches a gradient. The switch sits where the
 closed form's value *and its first two autodiff derivatives* are accurate, which for
-cancellation-prone kernels is far from zero (``x = 10`` for F2, 12 for C2 and D): a trig formula
-above a small cutoff is not enough (seed 001 §11.4 and issue [2]).
+cancellation-prone kernels is far from zero (``x = 10`` for F2, 12 for C2, 30 for D, 16 for
+G): a trig formula above a small cutoff is not enough (seed 001 §11.4 and issue [2]). D and G
+switched at 12 and π² until a grid of step 0.1 found D″ at 63 ulp (x = 13.4) and G′ at 8.5
+(x ≈ 10) on CPU; an H100 had measured them at 65.5 and 8.2.
 
 Notation (seed 001 §9–11, with θ² = x):
 
@@ -43,26 +45,27 @@ converges for θ < 2π; on the principal range θ ≤ π it is summed directly.
 
 Measured worst errors, in ulp, against mpmath at 50 digits (``python tests/test_scalar.py``
 reproduces this table; ``tests/test_scalar.py`` asserts value ≤ 4, f′ ≤ 8, f″ ≤ 64). Inputs:
-x = 0, subnormal (flushed to 0 by XLA on CPU), 1e-40 … 1e-4, both sides of every switch, and
-log-uniform x up to θ = 10π (C2, D: 3π; G: 2π − 0.3). Error scale: max(|f|, the size of the
-formula's terms, the change from one ulp of x — every caller forms x = θ² in floating point).
+x = 0, subnormal (flushed to 0 by XLA on CPU), 1e-40 … 1e-4, both sides of every switch, a
+grid of step 0.1 on 0.3 ≤ x ≤ 40, and log-uniform x up to θ = 10π (C2, D: 3π; G: 2π − 0.3).
+Error scale: max(|f|, the size of the formula's terms, the change from one ulp of x — every
+caller forms x = θ² in floating point).
 
 ==============  =====================  =====================
 kernel          float32 (f, f′, f″)    float64 (f, f′, f″)
 ==============  =====================  =====================
-cos_            0.8, 0.9, 0.7          1.0, 0.8, 0.8
-sinc            0.9, 0.9, 0.9          1.0, 1.1, 0.6
-F1              1.3, 0.9, 0.7          1.2, 0.7, 0.7
-F2              0.8, 3.2, 21.0         1.0, 5.1, 10.7
-C2              0.9, 2.5, 20.3         1.0, 2.5, 18.5
-D               1.6, 5.8, 25.2         0.9, 3.6, 30.3
-G               1.5, 6.2, 11.5         2.0, 5.9, 29.9
-G_principal     0.6, 1.7, 2.1          0.7, 1.9, 2.6
+cos_            0.9, 0.9, 0.7          1.0, 0.9, 0.8
+sinc            1.2, 1.0, 0.9          1.1, 1.1, 0.7
+F1              1.4, 1.1, 0.7          1.7, 1.0, 0.7
+F2              1.0, 3.2, 21.0         1.0, 5.1, 22.6
+C2              1.0, 5.2, 34.3         1.1, 4.3, 29.7
+D               3.1, 3.3, 6.2          1.9, 3.9, 6.5
+G               2.3, 2.3, 2.9          2.1, 3.5, 4.0
+G_principal     0.6, 2.1, 2.2          0.7, 3.5, 4.0
 atan2_over      1.3, 2.7, 2.6          1.5, 4.1, 3.0   (f, ∂/∂n2, ∂/∂w)
 ==============  =====================  =====================
 
 The second derivatives peak on the closed-form side of a switch, where autodiff of the
-closed form still cancels a little; every value and first derivative is within 6.2 ulp.
+closed form still cancels a little; every value and first derivative is within 5.2 ulp.
 """
 
 from __future__ import annotations
@@ -402,7 +405,7 @@ def C2(x: jax.Array) -> jax.Array:
 
 def D(x: jax.Array) -> jax.Array:
     """D = (2θ − 3 sin θ + θ cos θ)/(2θ⁵) = (C2 − 3·(1/6 − F2)/θ²)/2; series below
-    x = 12, the direct formula above (writing it as a difference of C2 and F2 terms would
+    x = 30, the direct formula above (writing it as a difference of C2 and F2 terms would
     cancel at large θ, where both are ≈ 1/(2θ²)). (The coupling coefficient of the SE(3)
     Jacobian, Barfoot's Q matrix.)"""
 
@@ -410,17 +413,17 @@ def D(x: jax.Array) -> jax.Array:
         theta = jnp.sqrt(x)
         return (2.0 * theta - 3.0 * jnp.sin(theta) + theta * jnp.cos(theta)) / (2.0 * x * x * theta)
 
-    return _switched("D", x, 12.0, closed)
+    return _switched("D", x, 30.0, closed)
 
 
 def G(x: jax.Array) -> jax.Array:
     """G = (1 − (θ/2) cot(θ/2))/θ², the ω̂² coefficient of the inverse SO(3) Jacobian
     and of the SE(3) log's V⁻¹ (the seeds' (θ/2)cot(θ/2) form: 1 − θ²G).
 
-    Summed from its all-positive Bernoulli series for x ≤ π² (the principal range,
-    convergence ratio ≤ 1/4); above that, the closed form (1 − h)/x with h ≤ 0, which
-    has no cancellation. Pole at θ = 2π."""
-    switch = math.pi**2 * (1 + 1e-6)
+    Summed from its all-positive Bernoulli series for x < 16 (convergence ratio
+    x/4π² ≤ 0.41); above that, the closed form (1 − h)/x with h < 0, which has no
+    cancellation. Pole at θ = 2π."""
+    switch = 16.0
 
     def closed(x: jax.Array) -> jax.Array:
         half = 0.5 * jnp.sqrt(x)
