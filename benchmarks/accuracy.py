@@ -115,7 +115,8 @@ def main() -> int:
     names = list(libs)
     print(f"Worst error in ulp, {' / '.join(names)} "
           f"(jaxlie_geo {_version('jaxlie_geo')}, jaxlie {_version('jaxlie')}, "
-          f"jax {jax.__version__}, {platform.machine()} CPU, {args.samples} samples per "
+          f"jax {jax.__version__}, {platform.machine()}, backend {jax.default_backend()} "
+          f"({jax.devices()[0].device_kind}), {args.samples} samples per "
           f"regime and |v|, {elapsed:.0f} s). Bounds: exp, log {M.BOUNDS['exp']:g}; "
           f"d/dx {M.BOUNDS['jac']:g}; d²/dx² {M.BOUNDS['hess']:g}; "
           f"**bold** = over the bound.\n")

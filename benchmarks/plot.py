@@ -144,7 +144,7 @@ def plot(files: list[Path], out: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("files", nargs="*", type=Path,
-                    default=[HERE / "cpu" / "xeon_2cores_float32.md", HERE / "cpu" / "xeon_2cores_float64.md"],
+                    default=[HERE / "cpu" / "xeon_2cores_2026-11-23_float32.md", HERE / "cpu" / "xeon_2cores_2026-11-23_float64.md"],
                     help="raw outputs of benchmarks/run.py --markdown (default: the 2-core CPU float32/64 runs)")
     ap.add_argument("--out", type=Path, default=HERE / "results.png", help="output PNG (default: benchmarks/results.png)")
     args = ap.parse_args()

@@ -475,7 +475,9 @@ def fmt_ns(x: float) -> str:
         return f"{x:.0f} ns"
     if x >= 10:
         return f"{x:.1f} ns"
-    return f"{x:.2f} ns"
+    if x >= 1:
+        return f"{x:.2f} ns"
+    return f"{x:.3g} ns"  # GPUs at 10^6: 0.1 ns/element needs three significant digits
 
 
 def fmt_n(n: int) -> str:
