@@ -99,7 +99,7 @@ def _bernoulli_even(count: int) -> list[Fraction]:
     return out[:count]
 
 
-_N_MAX = 60  # longest series any kernel may need (G in float64 needs ~35 terms)
+_N_MAX = 60  # longest series any kernel may need (G in float64, switched at x = 16: 53 terms)
 _ATAN_X_MAX = (math.sqrt(2.0) - 1.0) ** 2 * (1 + 1e-6)  # tan²(π/8)
 
 _COEFFS: dict[str, tuple[float, ...]] = {

@@ -94,7 +94,7 @@ SWITCHES = [1.0, 10.0, 12.0, math.pi**2, 16.0, 30.0]
 def sample_x(name, dtype, n=160):
     """Fixed tiny points, log-uniform x over the domain, both sides of every switch, and a
     grid of step 0.1 on 0.3 ≤ x ≤ 40, where the switches and the cancelling closed forms
-    are: log-uniform samples alone missed D″ at 63 ulp (x = 13.4) and G′ at 8.2 (x ≈ 10)."""
+    are: log-uniform samples alone missed D″ at 63 ulp (x = 13.4) and G′ at 8.5 (x ≈ 10)."""
     rng = np.random.default_rng(0)
     xs = [0.0, 1e-300, 1e-40, 1e-30, 1e-20, 1e-12, 1e-8, 1e-4]
     xs += list(np.exp(rng.uniform(np.log(1e-6), np.log(X_MAX[name]), n)))
