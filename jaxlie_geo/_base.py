@@ -95,8 +95,10 @@ def materialize(*xs: Any) -> Any:
     into every consumer that reads it and recomputes it per read. Measured at 10^6 SE3
     elements (float32, 2 cores): ``a @ SE3.exp(x)`` 196 → 73 ns/element (the exp alone: 63),
     ``(a.inverse() @ b).log()`` 122 → 74, ``a.interpolate(b, t)`` 290 → 159 (186 → 96 in
-    ``benchmarks/run.py``). On an input already in memory (a function argument) the
-    barrier is free. Transparent to jit, vmap and autodiff.
+    ``benchmarks/run.py``). On a whole input already in memory (a function argument) the
+    barrier is free; on a *slice* of one, jax ≥ 0.11 copies the slice (hence the
+    barrier-free ``SOBase`` kernels that the SE groups call). Transparent to jit, vmap
+    and autodiff.
 
     With jax ≥ 0.11 the tangents pass through without a barrier (``_barrier``): JAX's own
     rule puts them behind a second barrier, and jax 0.11.2 fails to transpose that one
@@ -591,6 +593,19 @@ class MatrixLieGroup(abc.ABC):
 class SOBase(MatrixLieGroup):
     """Base class for special orthogonal groups."""
 
+    # Barrier-free kernels of ``apply`` and ``multiply``, for the SE groups, which
+    # materialize whole elements once and pass the rotation in as a slice: a second
+    # barrier on that slice would copy it (jax ≥ 0.11 XLA:CPU materializes a barrier on a
+    # slice as a new buffer: 185 MB of temporaries for a 2^22-element SE3 compose).
+
+    @abc.abstractmethod
+    def _apply_kernel(self, points: jax.Array) -> jax.Array:
+        """``apply`` on checked points, with no ``materialize``."""
+
+    @abc.abstractmethod
+    def _multiply_kernel(self, other: Self) -> Self:
+        """``multiply`` with no ``materialize``."""
+
 
 ContainedSOType = TypeVar("ContainedSOType", bound=SOBase)
 
@@ -668,20 +683,26 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         rot = cls._rotation_type.identity(batch_axes, dtype)
         return cls.from_rotation(rot)
 
+    # Each operation materializes whole elements once, then uses the rotation's
+    # barrier-free kernels on slices of them (see ``SOBase._apply_kernel``).
+
     def apply(self, target: hints.Array) -> jax.Array:
         T, target = materialize(self, self._check_points(target))
-        return T.rotation().apply(target) + T.translation()
+        return T.rotation()._apply_kernel(target) + T.translation()
 
     def multiply(self, other: Self) -> Self:
         a, b = materialize(self, other)
         R = a.rotation()
         return type(self).from_rotation_and_translation(
-            R.multiply(b.rotation()), R.apply(b.translation()) + a.translation()
+            R._multiply_kernel(b.rotation()), R._apply_kernel(b.translation()) + a.translation()
         )
 
     def inverse(self) -> Self:
-        R_inv = self.rotation().inverse()
-        return type(self).from_rotation_and_translation(R_inv, -R_inv.apply(self.translation()))
+        T = materialize(self)
+        R_inv = T.rotation().inverse()
+        return type(self).from_rotation_and_translation(
+            R_inv, -R_inv._apply_kernel(T.translation())
+        )
 
     def normalize(self) -> Self:
         return type(self).from_rotation_and_translation(

@@ -123,13 +123,23 @@ class SO2(SOBase):
 
     @override
     def apply(self, target: hints.Array) -> jax.Array:
-        p = self._check_points(target)
-        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
-        x, y = p[..., 0], p[..., 1]
-        return jnp.stack([c * x - s * y, s * x + c * y], axis=-1)
+        return self._apply_kernel(self._check_points(target))
 
     @override
     def multiply(self, other: SO2) -> SO2:
+        return self._multiply_kernel(other)
+
+    # SO2's public operations are its kernels: they read each component twice and have
+    # never carried a barrier.
+
+    @override
+    def _apply_kernel(self, points: jax.Array) -> jax.Array:
+        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        x, y = points[..., 0], points[..., 1]
+        return jnp.stack([c * x - s * y, s * x + c * y], axis=-1)
+
+    @override
+    def _multiply_kernel(self, other: SO2) -> SO2:
         c1, s1 = self.unit_complex[..., 0], self.unit_complex[..., 1]
         c2, s2 = other.unit_complex[..., 0], other.unit_complex[..., 1]
         return SO2(jnp.stack([c1 * c2 - s1 * s2, s1 * c2 + c1 * s2], axis=-1))

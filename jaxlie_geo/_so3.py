@@ -427,11 +427,21 @@ class SO3(SOBase):
 
     @override
     def apply(self, target: hints.Array) -> jax.Array:
-        return rotate(*materialize(self.wxyz, self._check_points(target)))
+        R, p = materialize(self, self._check_points(target))
+        return R._apply_kernel(p)
 
     @override
     def multiply(self, other: SO3) -> SO3:
-        return SO3(quaternion_product(*materialize(self.wxyz, other.wxyz)))
+        a, b = materialize(self, other)
+        return a._multiply_kernel(b)
+
+    @override
+    def _apply_kernel(self, points: jax.Array) -> jax.Array:
+        return rotate(self.wxyz, points)
+
+    @override
+    def _multiply_kernel(self, other: SO3) -> SO3:
+        return SO3(quaternion_product(self.wxyz, other.wxyz))
 
     @override
     def inverse(self) -> SO3:
