@@ -20,6 +20,7 @@ import abc
 import dataclasses
 import functools
 import inspect
+import re
 from typing import (
     TYPE_CHECKING,
     Any,
@@ -112,7 +113,28 @@ def materialize(*xs: Any) -> Any:
     return out[0] if len(xs) == 1 else out
 
 
-_TANGENTS_PASS_THROUGH = tuple(int(v) for v in jax.__version__.split(".")[:2]) >= (0, 11)
+def _version(text: str) -> Tuple[int, ...]:
+    """The leading numeric components of a version string: "0.12.0.1" -> (0, 12, 0, 1),
+    "0.6.0rc1" -> (0, 6, 0)."""
+    out = []
+    for part in text.split("."):
+        digits = re.match(r"\d*", part).group()
+        if not digits:
+            break
+        out.append(int(digits))
+        if digits != part:
+            break
+    return tuple(out)
+
+
+# jax 0.5.3 is the first release with JVP and transpose rules for optimization_barrier
+# (0.4.38 the first with its batching rule); older ones fail on the first grad or vmap.
+if _version(jax.__version__) < (0, 5, 3):
+    raise ImportError(
+        f"jaxlie_geo needs jax >= 0.5.3 (the first release that differentiates "
+        f"lax.optimization_barrier); found jax {jax.__version__}."
+    )
+_TANGENTS_PASS_THROUGH = _version(jax.__version__) >= (0, 11)
 
 
 @jax.custom_jvp

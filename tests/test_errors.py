@@ -4,6 +4,8 @@ and the received shape; constructors do not validate."""
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -193,3 +195,24 @@ def test_non_float_dtypes_rejected(G):
 def test_from_xy_theta_incompatible_shapes():
     with pytest.raises(ValueError):
         SE2.from_xy_theta(np.zeros(2), np.zeros(3), 0.0)
+
+
+def test_jax_older_than_the_minimum_is_refused_at_import():
+    """jax < 0.5.3 cannot differentiate ``optimization_barrier`` (< 0.4.38 cannot vmap it):
+    importing jaxlie_geo there raises at once, naming both versions, instead of failing on a
+    user's first ``grad``. Runs a fresh interpreter whose jax reports 0.4.36."""
+    code = "import jax; jax.__version__ = '0.4.36'; import jaxlie_geo"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode != 0
+    assert "ImportError: jaxlie_geo needs jax >= 0.5.3" in out.stderr
+    assert "found jax 0.4.36" in out.stderr
+
+
+@pytest.mark.parametrize(("text", "want"), [
+    ("0.12.0.1", (0, 12, 0, 1)), ("0.5.3", (0, 5, 3)), ("0.6.0rc1", (0, 6, 0)),
+    ("0.7.0.dev20250601", (0, 7, 0)), ("1.0", (1, 0))])
+def test_version_parsing(text, want):
+    from jaxlie_geo._base import _version
+
+    assert _version(text) == want

@@ -29,6 +29,7 @@ from conftest import (
 import jax
 import jax.numpy as jnp
 import jaxlie_geo
+from _mpref import x64_for
 
 import jaxlie as jaxlie_ref  # noqa: E402  (the test extra installs it; never skipped)
 
@@ -215,7 +216,7 @@ def test_sample_uniform_same_draws(G, make_key):
 def test_sample_uniform_float32_matches_jaxlie_without_x64(G):
     """dtype=float32 under x64 draws what jaxlie draws when x64 is off."""
     key = jax.random.PRNGKey(3)
-    with jax.enable_x64(False):
+    with x64_for("float32"):  # x64 off, on every supported jax
         ref = np.asarray(REF[G].sample_uniform(key, (4,)).parameters())
     ours = G.sample_uniform(key, (4,), dtype=jnp.float32).parameters()
     assert ref.dtype == np.float32 and ours.dtype == jnp.float32
