@@ -131,6 +131,7 @@ class SO2(SOBase):
 
     # SO2's public operations are its kernels: they read each component twice and have
     # never carried a barrier.
+    _kernels_reread = False
 
     @override
     def _apply_kernel(self, points: jax.Array) -> jax.Array:
