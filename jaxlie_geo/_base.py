@@ -224,24 +224,50 @@ def _inherited_doc(cls: type, name: str) -> Any:
     return None
 
 
+def check_elements(where: str, *args: Any) -> None:
+    """Check the group elements among ``args`` at trace time: parameters of shape
+    ``(*batch, parameters_dim)``, and batch axes that broadcast together (numpy rules).
+    Raises ``ValueError`` naming ``where`` and the shapes. Without the first check
+    ``SO3(tangent).log()`` silently read a 3-vector as a quaternion; without the second a
+    batch mismatch surfaced as jax.numpy's "mul got incompatible shapes", naming neither
+    the operation nor the group."""
+    batches = []
+    for a in args:
+        if not isinstance(a, MatrixLieGroup):
+            continue
+        shape = getattr(a.parameters(), "shape", None)
+        if shape is None:
+            continue
+        if tuple(shape[-1:]) != (a.parameters_dim,):
+            raise ValueError(
+                f"{where}: {type(a).__name__} parameters must have shape "
+                f"(*batch, {a.parameters_dim}), got shape {tuple(shape)}."
+            )
+        batches.append(tuple(shape[:-1]))
+    check_batches(where, "batch axes", *batches)
+
+
+def check_batches(where: str, what: str, *batches: Tuple[int, ...]) -> Tuple[int, ...]:
+    """The broadcast of ``batches``; ``ValueError`` naming ``where``, ``what`` and the
+    shapes when they do not broadcast."""
+    try:
+        return tuple(onp.broadcast_shapes(*batches))
+    except ValueError:
+        shown = " and ".join(str(b) for b in batches)
+        raise ValueError(
+            f"{where}: {what} {shown} do not broadcast together (numpy rules)."
+        ) from None
+
+
 def _checking_elements(fn: Any, where: str) -> Any:
-    """``fn`` preceded by a check of the group elements among its arguments (``self``,
-    ``other``): parameters of shape ``(*batch, parameters_dim)``. Constructors cannot check
-    (JAX rebuilds pytrees with shapes, tracers, None, and ``jax.jacfwd`` of a group-valued
-    function returns an element holding a Jacobian), so without this ``SO3(tangent).log()``
-    silently read a 3-vector as a quaternion. Runs at trace time only."""
+    """``fn`` preceded by ``check_elements`` on its arguments (``self``, ``other``).
+    Constructors cannot check (JAX rebuilds pytrees with shapes, tracers, None, and
+    ``jax.jacfwd`` of a group-valued function returns an element holding a Jacobian), so
+    the operations do. Runs at trace time only."""
 
     @functools.wraps(fn)
     def checked(*args: Any, **kwargs: Any) -> Any:
-        for a in (*args, *kwargs.values()):
-            if not isinstance(a, MatrixLieGroup):
-                continue
-            shape = getattr(a.parameters(), "shape", None)
-            if shape is not None and tuple(shape[-1:]) != (a.parameters_dim,):
-                raise ValueError(
-                    f"{where}: {type(a).__name__} parameters must have shape "
-                    f"(*batch, {a.parameters_dim}), got shape {tuple(shape)}."
-                )
+        check_elements(where, *args, *kwargs.values())
         return fn(*args, **kwargs)
 
     return checked
@@ -300,7 +326,8 @@ def jit_function(*static_argnames: str) -> Any:
     primitive). Shape errors still raise at trace time."""
 
     def wrap(fn: Any) -> Any:
-        jitted = jax.jit(fn, static_argnames=static_argnames)
+        where = f"{fn.__module__.rsplit('.', 1)[-1]}.{fn.__name__}"
+        jitted = jax.jit(_checking_elements(fn, where), static_argnames=static_argnames)
         return functools.wraps(fn)(lambda *args, **kwargs: jitted(*args, **kwargs))
 
     return wrap
@@ -431,7 +458,10 @@ class MatrixLieGroup(abc.ABC):
 
     @abc.abstractmethod
     def normalize(self) -> Self:
-        """Project the parameters back onto the group (unit quaternion / complex)."""
+        """Project the parameters back onto the group: the rotation part divided by its
+        norm (unit quaternion / complex), the translation kept. Any finite nonzero rotation
+        part works, whatever its scale (``_scalar.unit``); a zero or non-finite one has no
+        direction and gives NaN."""
 
     def jlog(self) -> jax.Array:
         """Jacobian of the log under right perturbations, the inverse right Jacobian at
@@ -599,13 +629,15 @@ class MatrixLieGroup(abc.ABC):
         return as_float_array(matrix, "matrix", (n, n), f"{cls.__name__}.{where}")
 
     def _check_points(self, target: hints.Array) -> jax.Array:
-        return as_float_array(
-            target,
-            "target",
-            (self.space_dim,),
-            f"{type(self).__name__}.apply",
-            like=self.parameters(),
+        where = f"{type(self).__name__}.apply"
+        points = as_float_array(
+            target, "target", (self.space_dim,), where, like=self.parameters()
         )
+        check_batches(
+            where, "batch axes of the element and the points",
+            self.get_batch_axes(), points.shape[:-1],
+        )
+        return points
 
     @abc.abstractmethod
     def _rplus_jacobian(self) -> jax.Array:

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array, pytree_dataclass
+from ._base import MatrixLieGroup, as_float_array, check_batches, pytree_dataclass
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
@@ -31,7 +31,9 @@ class Geodesic(Generic[GroupT]):
         """Element at time(s) ``t``; ``t`` broadcasts numpy-style against the batch axes
         (shape ``broadcast(B, t.shape)``)."""
         G = type(self.start)
-        t = as_float_array(t, "t", (), f"{G.__name__} geodesic", like=self.tangent)
+        where = f"{G.__name__} geodesic"
+        t = as_float_array(t, "t", (), where, like=self.tangent)
+        check_batches(where, "batch axes of the path and of t", self.tangent.shape[:-1], t.shape)
         t = t.astype(jnp.result_type(t, self.tangent))
         return self.start.multiply(G.exp(t[..., None] * self.tangent))
 

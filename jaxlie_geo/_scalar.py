@@ -208,6 +208,20 @@ def _two_sum(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
     return s, (a - (s - bb)) + (b - bb)
 
 
+def dot(a: jax.Array, b: jax.Array) -> jax.Array:
+    """Dot product over the last axis, written out (a reduce would split XLA's fusion, and
+    ``jnp.sum`` made ``unit`` 2x slower at 10^6 elements)."""
+    out = a[..., 0] * b[..., 0]
+    for i in range(1, a.shape[-1]):
+        out = out + a[..., i] * b[..., i]
+    return out
+
+
+def sq_norm(w: jax.Array) -> jax.Array:
+    """Σ wᵢ² over the last axis (``dot(w, w)``)."""
+    return dot(w, w)
+
+
 @jax.custom_jvp
 def sq_norm_compensated(w: jax.Array) -> Tuple[jax.Array, jax.Array]:
     """‖w‖² over the last axis as hi + lo with |lo| ≤ ulp(hi): about twice the working
@@ -457,3 +471,27 @@ def atan2_over(n2: jax.Array, w: jax.Array) -> jax.Array:
     wr = w + jnp.sqrt(n2 + w * w)
     inv = 1.0 / (wr + jnp.sqrt(wr * wr + n2))  # 1/((w + r)(1 + √(1 + u²)))
     return 4.0 * _horner("atan", n2 * inv * inv, _ATAN_X_MAX) * inv
+
+
+def unit(v: jax.Array) -> jax.Array:
+    """``v / ‖v‖`` along the last axis, for any finite nonzero ``v`` of normal floats.
+
+    Where ``Σ vᵢ²`` overflows, or is so small (< 2^(emin + p + 2), p the significand's
+    bits: float32 2^-100, float64 2^-967) that flushed squares could matter, ``v`` is first
+    scaled by a power of two, 2^-(emax/2 + 2) (float32 2^-66) or 2^(3|emin|/4) (float32
+    2^94), which makes the largest square a normal float and keeps the sum finite.
+    Power-of-two scaling is exact, so elsewhere the result is bit for bit the plain
+    ``v / √(Σ vᵢ²)``. The plain form returned 0 for a float32 quaternion with components
+    of 3e38 and inf/NaN at 1e-30. A zero or non-finite ``v`` (subnormal components count
+    as zero: XLA:CPU flushes them) has no direction and gives NaN in every component.
+    Derivatives are those of the plain formula (the scale is piecewise constant).
+    10^6 float32 quaternions, 2-core VM: 1.8 ns/element, the plain form 1.0, jaxlie 3.1."""
+    fi = jnp.finfo(v.dtype)
+    n2 = sq_norm(v)[..., None]
+    big = n2 == jnp.inf
+    small = n2 < 2.0 ** (fi.minexp + fi.nmant + 3)
+    up, down = 2.0 ** (-3 * fi.minexp // 4), 2.0 ** -(fi.maxexp // 2 + 2)
+    scale = jnp.where(big, down, jnp.where(small, up, 1.0)).astype(v.dtype)
+    s = v * scale
+    n = jnp.sqrt(jnp.where(big | small, sq_norm(s)[..., None], n2))
+    return jnp.where((n > 0) & (n < jnp.inf), s / n, jnp.nan)

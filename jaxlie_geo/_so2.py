@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 from typing_extensions import override
 
-from . import hints
+from . import _scalar, hints
 from ._base import SOBase, as_float_array, pytree_dataclass, resolve_dtype
 
 
@@ -152,8 +152,7 @@ class SO2(SOBase):
 
     @override
     def normalize(self) -> SO2:
-        p = self.unit_complex
-        return SO2(p / jnp.sqrt(p[..., :1] ** 2 + p[..., 1:] ** 2))
+        return SO2(_scalar.unit(self.unit_complex))
 
     @override
     def _rplus_jacobian(self) -> jax.Array:

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
+from ._scalar import dot, sq_norm
 from ._base import SOBase, as_float_array, materialize, pytree_dataclass, resolve_dtype
 
 T = TypeVar("T")
@@ -30,18 +31,6 @@ def skew(w: jax.Array) -> jax.Array:
         [jnp.stack([o, -z, y], -1), jnp.stack([z, o, -x], -1), jnp.stack([-y, x, o], -1)],
         axis=-2,
     )
-
-
-def dot(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Dot product over the last axis, written out (a reduce would split XLA's fusion)."""
-    out = a[..., 0] * b[..., 0]
-    for i in range(1, a.shape[-1]):
-        out = out + a[..., i] * b[..., i]
-    return out
-
-
-def sq_norm(w: jax.Array) -> jax.Array:
-    return dot(w, w)
 
 
 def exp_quaternion(
@@ -450,8 +439,7 @@ class SO3(SOBase):
 
     @override
     def normalize(self) -> SO3:
-        q = self.wxyz
-        return SO3(q / jnp.sqrt(sq_norm(q))[..., None])
+        return SO3(_scalar.unit(self.wxyz))
 
     @override
     def _rplus_jacobian(self) -> jax.Array:

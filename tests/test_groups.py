@@ -347,6 +347,39 @@ def test_normalize(G, batch, dtype, seed, scale):
     assert_close(np.linalg.norm(to_np(Ns.parameters())[..., :k], axis=-1), np.ones(batch), dtype, 2)
 
 
+
+@over_groups_dtypes
+def test_normalize_any_scale(G, dtype):
+    """A rotation part scaled by anything from just above the smallest normal float to
+    the largest normalizes to the same element: the sum of squares would overflow (float32
+    3e38: the plain formula returned 0) or underflow (1e-30: inf and NaN) without the
+    power-of-two scaling. Scaling by a power of two changes nothing, bit for bit. Zero and
+    non-finite rotation parts give NaN in every rotation component."""
+    k = {SO2: 2, SE2: 2, SO3: 4, SE3: 4}[G]
+    p = np.asarray(random_element(G, 7, (5,), dtype).parameters())
+    fi, f = np.finfo(dtype), np.dtype(dtype).type
+    for scale in (float(fi.tiny) * 2**10, 1e-30, 0.5**60, 2.0**60, 1e30, float(fi.max) / 2):
+        scaled = p.copy()
+        scaled[..., :k] = (scaled[..., :k].astype(np.float64) * scale).astype(dtype)
+        got = G(jnp.asarray(scaled)).normalize().parameters()
+        assert_close(got, p, dtype, 4, msg=f"scale {scale:g}")
+    exact = p.copy()
+    exact[..., :k] *= f(2.0**40)
+    np.testing.assert_array_equal(
+        np.asarray(G(jnp.asarray(exact)).normalize().parameters()),
+        np.asarray(G(jnp.asarray(p)).normalize().parameters()),
+    )
+    bad = np.repeat(p[:1], 3, axis=0)
+    bad[0, :k] = 0.0
+    bad[1, 0] = np.inf
+    bad[2, 0] = np.nan
+    got = np.asarray(G(jnp.asarray(bad)).normalize().parameters())
+    assert np.isnan(got[:, :k]).all()
+    np.testing.assert_array_equal(got[:, k:], bad[:, k:])
+    g = jax.grad(lambda q: G(q).normalize().parameters()[0, 0])(jnp.asarray(p * f(2.0**-70)))
+    g_ref = jax.grad(lambda q: G(q).normalize().parameters()[0, 0])(jnp.asarray(p))
+    assert_close(g * f(2.0**-70), g_ref, dtype, 4)
+
 # ---------------------------------------------------------------------------------
 # jlog.
 
