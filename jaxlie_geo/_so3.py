@@ -350,7 +350,9 @@ class SO3(SOBase):
         """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖ (seed 002's Rodrigues form, in
         quaternions), both coefficients from ``_scalar.half_angle`` (closed forms with an
         exact custom JVP; θ² compensated when the batch holds an angle beyond √10, see
-        ``by_angle``). Any angle; for θ > π the result has w < 0 (it is not re-signed)."""
+        ``by_angle``). Any angle whose square is finite (θ < 1.8e19 in float32, 1.3e154 in
+        float64; beyond, θ² overflows and the result is NaN, as jaxlie's is); for θ > π the
+        result has w < 0 (it is not re-signed)."""
         w = materialize(cls._check_tangent(tangent))
         return SO3(by_angle(lambda comp, w: exp_quaternion(w, exp_half_angle(w, comp)), w))
 

@@ -156,6 +156,31 @@ def test_exp_of_log_special_elements(G, dtype):
 
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=lambda d: jnp.dtype(d).name)
+def test_exp_at_enormous_angles(dtype):
+    """Rotation angles up to where θ² overflows keep the quaternion within 2 eps of mpmath
+    (the angle is the exact float given); beyond, SO3/SE3 exp give NaN, as documented
+    (SO2/SE2 take the angle directly and stay accurate)."""
+    import mpmath
+
+    mpmath.mp.dps = 60
+    eps = float(jnp.finfo(dtype).eps)
+    below, above = (1e19, 1e20) if dtype == jnp.float32 else (1e150, 1e160)
+    for th in (1e5, 1e10, below, above):
+        t = float(np.dtype(dtype).type(th))
+        half = mpmath.mpf(t) / 2
+        want3 = np.array([float(mpmath.cos(half)), float(mpmath.sin(half))])
+        want2 = np.array([float(mpmath.cos(2 * half)), float(mpmath.sin(2 * half))])
+        so3 = to_np(SO3.exp(np.array([0.0, t, 0.0], dtype)).wxyz)[[0, 2]]
+        se3 = to_np(SE3.exp(np.array([1.0, 2.0, 3.0, 0.0, t, 0.0], dtype)).wxyz_xyz)[[0, 2]]
+        so2 = to_np(SO2.exp(np.array([t], dtype)).unit_complex)
+        se2 = to_np(SE2.exp(np.array([0.0, 0.0, t], dtype)).unit_complex_xy)[:2]
+        for got, want in ((so2, want2), (se2, want2)) + (((so3, want3), (se3, want3)) if th < above else ()):
+            np.testing.assert_allclose(got, want, rtol=0, atol=2 * eps, err_msg=f"θ = {t:g}")
+        if th == above:
+            assert np.isnan(so3).all() and np.isnan(se3).all()
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=lambda d: jnp.dtype(d).name)
 def test_log_is_scale_invariant_over_the_documented_norms(dtype):
     # _scalar.atan2_over: any norm whose square is a normal float (1e-19..1e19 in float32).
     # The rotation, and so the log, depends on q's direction only; SE3.log's translation
