@@ -20,6 +20,7 @@ import abc
 import dataclasses
 import functools
 import inspect
+import math
 import re
 from typing import (
     TYPE_CHECKING,
@@ -27,6 +28,7 @@ from typing import (
     ClassVar,
     Generic,
     Iterator,
+    Optional,
     Sequence,
     Tuple,
     TypeVar,
@@ -86,6 +88,14 @@ def resolve_dtype(dtype: Any) -> jnp.dtype:
     if not jnp.issubdtype(dtype, jnp.floating):
         raise ValueError(f"dtype must be a floating dtype, got {dtype}.")
     return jax.dtypes.canonicalize_dtype(dtype)
+
+
+def static_size(shape: Sequence[Any]) -> Optional[int]:
+    """The number of elements of ``shape``, or None when a dimension is symbolic
+    (``jax.export`` shape polymorphism), where size-dependent choices take their default."""
+    if all(isinstance(d, (int, onp.integer)) for d in shape):
+        return math.prod(shape)
+    return None
 
 
 def materialize(*xs: Any) -> Any:
@@ -250,8 +260,8 @@ def check_elements(where: str, *args: Any) -> None:
 def check_batches(where: str, what: str, *batches: Tuple[int, ...]) -> Tuple[int, ...]:
     """The broadcast of ``batches``; ``ValueError`` naming ``where``, ``what`` and the
     shapes when they do not broadcast."""
-    try:
-        return tuple(onp.broadcast_shapes(*batches))
+    try:  # jnp's, not numpy's: it takes jax.export's symbolic dimensions
+        return tuple(jnp.broadcast_shapes(*batches))
     except ValueError:
         shown = " and ".join(str(b) for b in batches)
         raise ValueError(

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any, Callable, Optional, Tuple, TypeVar
 
 import jax
@@ -11,7 +10,14 @@ from typing_extensions import override
 
 from . import _scalar, hints
 from ._scalar import dot, sq_norm
-from ._base import SOBase, as_float_array, materialize, pytree_dataclass, resolve_dtype
+from ._base import (
+    SOBase,
+    as_float_array,
+    materialize,
+    pytree_dataclass,
+    resolve_dtype,
+    static_size,
+)
 
 T = TypeVar("T")
 
@@ -66,7 +72,8 @@ def by_angle(kernel: Callable[..., T], omega: jax.Array, *args: jax.Array) -> T:
     the work of SO3.exp, and they made XLA:CPU split it into 5 fusions, 3 spread over
     threads, which at 10³ elements cost 2.5x jaxlie's time. One batch-level ``lax.cond`` on
     CPU for batches of at least ``_BY_ANGLE_MIN_BATCH`` elements (static shapes: under
-    ``vmap`` the function sees one element); smaller batches, where the cond's dispatch
+    ``vmap`` the function sees one element; a symbolic batch, ``jax.export``, counts as
+    large); smaller batches, where the cond's dispatch
     costs more than it saves, and other backends (GPU: a cond would stall on the
     predicate) always take the compensated kernel.
 
@@ -75,7 +82,8 @@ def by_angle(kernel: Callable[..., T], omega: jax.Array, *args: jax.Array) -> T:
     XLA compile and transpose both branches (SO3 grad compile 1.3 s against 0.65 s).
     Every array the kernel depends on must be passed in ``omega``/``args``, not closed
     over, so that its derivative is not lost."""
-    if math.prod(omega.shape[:-1]) < _BY_ANGLE_MIN_BATCH:
+    n = static_size(omega.shape[:-1])
+    if n is not None and n < _BY_ANGLE_MIN_BATCH:
         return kernel(True, omega, *args)
 
     @jax.custom_jvp

@@ -422,3 +422,36 @@ def test_static_batch_axes_accept_lists(batch_axes):
         assert G.sample_uniform(jax.random.PRNGKey(0), batch_axes).get_batch_axes() == tuple(
             batch_axes
         )
+
+
+@over_groups_dtypes
+def test_export_with_a_symbolic_batch(G, dtype):
+    """``jax.export`` with a symbolic batch size (shape polymorphism, as jaxlie allows):
+    every size-dependent choice (the angle-dependent kernel, chunking, broadcast checks)
+    takes its default, and the exported function computes what ``jit`` does."""
+    from jax import export
+
+    def f(pt, pu, x, p):
+        T, U = G(pt), G(pu)
+        V = T @ G.exp(x)
+        J = jaxlie_geo.jacobians.compose(T, U)
+        return (
+            V.log(), (V @ U.inverse()).parameters(), V @ p, V.jlog(), G.jac_right(x),
+            T.interpolate(U, 0.3).parameters(), V.normalize().parameters(), V.adjoint(),
+            G.from_matrix(V.as_matrix()).parameters(), J[0], J[1],
+        )
+
+    (b,) = export.symbolic_shape("b")
+    spec = lambda k: jax.ShapeDtypeStruct((b, k), dtype)  # noqa: E731
+    k, d, m = G.tangent_dim, G.space_dim, G.parameters_dim
+    exported = export.export(jax.jit(f))(spec(m), spec(m), spec(k), spec(d))
+    for n, seed in ((5, 0), (300, 1)):
+        args = (
+            random_element(G, seed, (n,), dtype).parameters(),
+            random_element(G, seed + 1, (n,), dtype).parameters(),
+            random_tangent(G, seed, (n,), dtype),
+            random_points(G, seed, (n,), dtype),
+        )
+        for got, want in zip(exported.call(*args), jax.jit(f)(*args)):
+            assert got.dtype == want.dtype == dtype
+            assert_close(got, want, dtype, 4)
