@@ -485,7 +485,7 @@ def unit(v: jax.Array) -> jax.Array:
     of 3e38 and inf/NaN at 1e-30. A zero or non-finite ``v`` (subnormal components count
     as zero: XLA:CPU flushes them) has no direction and gives NaN in every component.
     Derivatives are those of the plain formula (the scale is piecewise constant).
-    10^6 float32 quaternions, 2-core VM: 1.8 ns/element, the plain form 1.0, jaxlie 3.1."""
+    10^6 float32 quaternions, 2-core VM: 2.25 ns/element, the plain form 1.33, jaxlie 3.17."""
     fi = jnp.finfo(v.dtype)
     n2 = sq_norm(v)[..., None]
     big = n2 == jnp.inf
