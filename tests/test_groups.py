@@ -372,7 +372,6 @@ def test_normalize(G, batch, dtype, seed, scale):
     assert_close(np.linalg.norm(to_np(Ns.parameters())[..., :k], axis=-1), np.ones(batch), dtype, 2)
 
 
-
 @over_groups_dtypes
 def test_normalize_any_scale(G, dtype):
     """A rotation part scaled by anything from just above the smallest normal float to
@@ -404,6 +403,7 @@ def test_normalize_any_scale(G, dtype):
     g = jax.grad(lambda q: G(q).normalize().parameters()[0, 0])(jnp.asarray(p * f(2.0**-70)))
     g_ref = jax.grad(lambda q: G(q).normalize().parameters()[0, 0])(jnp.asarray(p))
     assert_close(g * f(2.0**-70), g_ref, dtype, 4)
+
 
 # ---------------------------------------------------------------------------------
 # jlog.
