@@ -9,7 +9,6 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._scalar import dot, sq_norm
 from ._base import (
     SOBase,
     as_float_array,
@@ -18,6 +17,7 @@ from ._base import (
     resolve_dtype,
     static_size,
 )
+from ._scalar import dot, sq_norm
 
 T = TypeVar("T")
 
