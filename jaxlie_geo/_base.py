@@ -288,13 +288,21 @@ def _jit_public_methods(cls: type) -> None:
 
     Measured (benchmarks/RESULTS.md): an eager SE3.exp costs ~1.5 ms as a chain of
     primitive dispatches and ~5 µs as one jitted call; inside a user's ``jit`` the wrapper
-    is inlined. ``batch_axes`` and ``dtype`` are static; the class of a classmethod is
-    static; shape errors still raise at trace time.
+    is inlined. ``batch_axes`` and ``dtype`` are static; shape errors still raise at trace
+    time.
+
+    A classmethod becomes, on each concrete class, a ``jax.jit`` of the function with
+    ``cls`` bound (stored as a staticmethod, its signature without ``cls``), as in jaxlie:
+    so ``SO3.exp`` is itself a jitted function and ``SO3.exp.lower(tangent)``,
+    ``.trace`` and ``.eval_shape`` work (ahead-of-time compilation). A subclass rebinds it.
     """
     for name in dir(cls):
         if name.startswith("_") or name in _NOT_JITTED:
             continue
         raw = inspect.getattr_static(cls, name)
+        bound_of = getattr(getattr(raw, "__func__", None), "_classmethod", None)
+        if bound_of is not None:  # a classmethod bound to a base class: bind it to cls
+            raw = classmethod(bound_of)
         kind = type(raw) if isinstance(raw, (classmethod, staticmethod)) else None
         fn = raw.__func__ if kind else raw
         if not inspect.isfunction(fn) or getattr(fn, "_jitted", False):
@@ -304,10 +312,12 @@ def _jit_public_methods(cls: type) -> None:
         sig = inspect.signature(fn)
         names = list(sig.parameters)
         static = tuple(n for n in _STATIC_NAMES if n in names)
-        argnums = tuple(names.index(n) for n in static)
-        if kind is classmethod:
-            argnums = (0, *argnums)
         checked = _checking_elements(fn, f"{cls.__name__}.{name}")
+        if kind is classmethod:
+            checked = functools.partial(checked, cls)
+            sig = sig.replace(parameters=list(sig.parameters.values())[1:])
+            names = names[1:]
+        argnums = tuple(names.index(n) for n in static)
         jitted = jax.jit(checked, static_argnums=argnums, static_argnames=static)
         if "batch_axes" in names:
             pos = names.index("batch_axes")
@@ -320,13 +330,21 @@ def _jit_public_methods(cls: type) -> None:
                     kwargs["batch_axes"] = tuple(kwargs["batch_axes"])
                 return _jitted(*args, **kwargs)
 
+            for stage in ("lower", "trace", "eval_shape"):  # AOT, as on a jax.jit
+                if hasattr(jitted, stage):
+                    setattr(call, stage, getattr(jitted, stage))
+            call.__signature__ = sig  # type: ignore[attr-defined]  # (a jax.jit has its own)
         else:
             call = jitted  # type: ignore[assignment]
         wrapper = functools.wraps(fn)(call)
         wrapper._jitted = True  # type: ignore[attr-defined]
         if not fn.__doc__:  # an override documented in the base class: show the base's text
             wrapper.__doc__ = _inherited_doc(cls, name)
-        setattr(cls, name, kind(wrapper) if kind else wrapper)
+        if kind is classmethod:
+            wrapper._classmethod = fn  # type: ignore[attr-defined]
+            setattr(cls, name, staticmethod(wrapper))
+        else:
+            setattr(cls, name, kind(wrapper) if kind else wrapper)
 
 
 def jit_function(*static_argnames: str) -> Any:
@@ -621,7 +639,8 @@ class MatrixLieGroup(abc.ABC):
     def __repr__(self) -> str:
         name = dataclasses.fields(self)[0].name  # type: ignore[arg-type]
         p = self.parameters()
-        if isinstance(p, jax.core.Tracer) or not hasattr(p, "shape"):
+        # Tracers, and the ShapeDtypeStructs of jax.eval_shape, have no values to show.
+        if isinstance(p, jax.core.Tracer) or not isinstance(p, (jax.Array, onp.ndarray)):
             return f"{type(self).__name__}({name}={p})"
         return f"{type(self).__name__}({name}={onp.round(onp.asarray(p), 5)})"
 

@@ -935,6 +935,24 @@ def test_repr_names_the_field_and_rounds_the_values(G):
     assert "Array(" not in text and "dtype" not in text
     traced = jax.jit(lambda T: (repr(T), T)[1])  # repr of a traced element does not fail
     traced(T)
+    shaped = repr(jax.eval_shape(lambda: G.identity((2,))))  # holds a ShapeDtypeStruct
+    assert shaped.startswith(f"{G.__name__}({field}=ShapeDtypeStruct(shape=(2, ")
+
+
+@pytest.mark.parametrize("G", [SE2, SE3], ids=lambda G: G.__name__)
+def test_a_subclass_gets_classmethods_bound_to_it(G):
+    """Classmethods are jitted with their class bound (for ``.lower``); a subclass binds
+    them again, so the constructor that builds ``cls(...)`` builds the subclass."""
+
+    class Pose(G):  # type: ignore[misc,valid-type]
+        pass
+
+    jax.tree_util.register_pytree_node(
+        Pose, lambda T: ((T.parameters(),), None), lambda _, c: Pose(*c)
+    )
+    R = G._rotation_type.identity()
+    T = Pose.from_rotation_and_translation(R, jnp.zeros(G.space_dim))
+    assert type(T) is Pose and type(G.from_rotation_and_translation(R, T.translation())) is G
 
 
 @over_groups
