@@ -55,3 +55,19 @@ def test_pose_interpolation_quick(tmp_path: Path) -> None:
     data = png.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     assert len(data) > 20_000
+
+
+def test_readme_python_blocks_run() -> None:
+    """Every ```python block of README.md runs as written, in order, in a fresh process
+    (float32 defaults, as a user's would be); the quick start asserts its own round trip."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
+    assert blocks, "README.md has no python block"
+    proc = subprocess.run(
+        [sys.executable, "-c", "\n".join(blocks)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
