@@ -214,7 +214,42 @@ def pytree_dataclass(cls: _C) -> _C:
         return obj
 
     jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
+    _register_flax_state(cls, names)
     return cls
+
+
+try:  # flax is optional: serialization is registered only where it imports
+    from flax import serialization as _flax_serialization
+except Exception:  # absent, or broken against this jax: then there is nothing to register
+    _flax_serialization = None
+
+
+def _register_flax_state(cls: type, names: Tuple[str, ...]) -> None:
+    """Register ``cls`` with ``flax.serialization`` (when flax is installed), as jaxlie's
+    jax_dataclasses does: the state dict is ``{field name: state of the field}``, e.g.
+    ``{"wxyz_xyz": array}``, so ``to_bytes``/``from_bytes`` and ``to_state_dict`` work and
+    a file written by either library loads in the other (same field names). Restoring
+    raises ``ValueError`` naming a missing or unknown field."""
+    if _flax_serialization is None:
+        return
+    ser = _flax_serialization
+
+    def to_state(x: Any) -> dict:
+        return {n: ser.to_state_dict(getattr(x, n)) for n in names}
+
+    def from_state(x: Any, state: dict) -> Any:
+        missing = [n for n in names if n not in state]
+        unknown = sorted(set(state) - set(names))
+        if missing or unknown:
+            raise ValueError(
+                f"{cls.__name__} state dict: missing field(s) {missing}, unknown field(s) "
+                f"{unknown}; expected exactly {list(names)}."
+            )
+        return dataclasses.replace(
+            x, **{n: ser.from_state_dict(getattr(x, n), state[n]) for n in names}
+        )
+
+    ser.register_serialization_state(cls, to_state, from_state)
 
 
 # ---------------------------------------------------------------------------------

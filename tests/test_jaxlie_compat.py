@@ -32,6 +32,7 @@ import jaxlie_geo
 from _mpref import x64_for
 
 import jaxlie as jaxlie_ref  # noqa: E402  (the test extra installs it; never skipped)
+from flax import serialization  # noqa: E402  (likewise)
 
 REF = {
     jaxlie_geo.SO2: jaxlie_ref.SO2,
@@ -124,6 +125,32 @@ def test_jitted_methods_compile_ahead_of_time(G):
     assert G.identity.lower((2,)).compile()().parameters().shape == (2, G.parameters_dim)
     drawn = G.sample_uniform.eval_shape(jax.random.PRNGKey(0), (5,))
     assert drawn.parameters().shape == (5, G.parameters_dim)
+
+
+@over_groups_dtypes
+def test_flax_serialization_interchanges_with_jaxlie(G, dtype):
+    """jaxlie's elements serialize with flax (jax_dataclasses registers them); ours too,
+    with the same state dict, so bytes written by either library load in the other, and
+    a round trip returns the parameters bit for bit."""
+    T = random_element(G, 31, (2, 3), dtype)
+    p = to_np(T.parameters())
+    ours, theirs = serialization.to_bytes(T), serialization.to_bytes(ref_of(T))
+    assert ours == theirs
+    back = serialization.from_bytes(G.identity((2, 3), dtype), theirs)
+    assert type(back) is G
+    np.testing.assert_array_equal(to_np(back.parameters()), p)
+    in_jaxlie = serialization.from_bytes(ref_of(G.identity((2, 3), dtype)), ours)
+    np.testing.assert_array_equal(to_np(in_jaxlie.parameters()), p)
+    # Nested: a geodesic is a pytree dataclass holding an element.
+    path = jaxlie_geo.geodesic(T, T.inverse())
+    state = serialization.to_state_dict(path)
+    fields = [f.name for f in dataclasses.fields(REF[G])]
+    assert set(state) == {"start", "tangent"} and list(state["start"]) == fields
+    again = serialization.from_bytes(path, serialization.to_bytes(path))
+    np.testing.assert_array_equal(to_np(again(0.3).parameters()), to_np(path(0.3).parameters()))
+    other = next(H for H in GROUPS if H.parameters_dim != G.parameters_dim)
+    with pytest.raises(ValueError, match=f"{G.__name__} state dict: missing field"):
+        serialization.from_bytes(G.identity(), serialization.to_bytes(other.identity()))
 
 
 # ---------------------------------------------------------------------------------
