@@ -26,10 +26,11 @@ $(VENV)/.installed-test: pyproject.toml | $(PY)
 demo: $(VENV)/.installed-examples
 	$(PY) examples/pose_interpolation.py
 
-# One pytest worker per core (pytest-xdist): compilation dominates the suite and XLA keeps
-# about 1.3 of 2 cores busy alone. On the 2-core CI VM, 683 s -> ~500 s.
+# One pytest worker per core (pytest-xdist), at most 8 (each is a process with its own jax
+# and compile caches): compilation dominates the suite and XLA alone keeps about 1.3 of 2
+# cores busy. On the 2-core CI VM, 626-741 s -> 447 s.
 test: $(VENV)/.installed-test
-	$(PY) -m pytest -n auto --dist worksteal
+	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
 bench: $(VENV)/.installed-test
 	$(PY) benchmarks/run.py
