@@ -196,6 +196,7 @@ def pytree_dataclass(cls: _C) -> _C:
     # Group elements keep MatrixLieGroup.__repr__ (rounded values, no dtype noise).
     own_repr = not issubclass(cls, MatrixLieGroup)
     cls = dataclasses.dataclass(frozen=True, eq=False, repr=own_repr)(cls)  # type: ignore[assignment]
+    cls.__setattr__ = _setattr_if_mutable  # type: ignore[assignment,method-assign]
     names = tuple(f.name for f in dataclasses.fields(cls))
     keys = tuple(jax.tree_util.GetAttrKey(n) for n in names)
 
@@ -216,6 +217,37 @@ def pytree_dataclass(cls: _C) -> _C:
     jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
     _register_flax_state(cls, names)
     return cls
+
+
+def _setattr_if_mutable(self: Any, name: str, value: Any) -> None:
+    """Frozen (``dataclasses.FrozenInstanceError``), except on the copies that
+    ``jax_dataclasses.copy_and_mutate`` yields, which it marks with ``__mutability__``:
+    there a field may be reassigned, as on jaxlie's jax_dataclasses elements. With
+    ``validate=True`` (its default) the new value must have the old one's tree structure
+    and shapes, and a dtype of the same kind (jax_dataclasses' rule); else ``ValueError``."""
+    mode = getattr(self.__dict__.get("__mutability__"), "name", "FROZEN")
+    if mode == "FROZEN":
+        raise dataclasses.FrozenInstanceError(
+            f"cannot assign to field {name!r}: {type(self).__name__} is frozen (build a new "
+            f"element, use dataclasses.replace, or jax_dataclasses.copy_and_mutate)."
+        )
+    if mode == "MUTABLE":
+        old, new = getattr(self, name), value
+        old_leaves, old_def = jax.tree_util.tree_flatten(old)
+        new_leaves, new_def = jax.tree_util.tree_flatten(new)
+        same = old_def == new_def and all(
+            onp.shape(a) == onp.shape(b)
+            and onp.result_type(a).kind == onp.result_type(b).kind
+            for a, b in zip(old_leaves, new_leaves)
+        )
+        if not same:
+            shown = [(onp.shape(x), str(onp.result_type(x))) for x in new_leaves]
+            want = [(onp.shape(x), str(onp.result_type(x))) for x in old_leaves]
+            raise ValueError(
+                f"{type(self).__name__}.{name}: copy_and_mutate needs the same structure, "
+                f"shapes and kind of dtype: got {shown}, had {want}."
+            )
+    object.__setattr__(self, name, value)
 
 
 try:  # flax is optional: serialization is registered only where it imports

@@ -32,7 +32,8 @@ import jaxlie_geo
 from _mpref import x64_for
 
 import jaxlie as jaxlie_ref  # noqa: E402  (the test extra installs it; never skipped)
-from flax import serialization  # noqa: E402  (likewise)
+import jax_dataclasses as jdc  # noqa: E402  (a dependency of jaxlie)
+from flax import serialization  # noqa: E402  (the test extra installs it)
 
 REF = {
     jaxlie_geo.SO2: jaxlie_ref.SO2,
@@ -151,6 +152,44 @@ def test_flax_serialization_interchanges_with_jaxlie(G, dtype):
     other = next(H for H in GROUPS if H.parameters_dim != G.parameters_dim)
     with pytest.raises(ValueError, match=f"{G.__name__} state dict: missing field"):
         serialization.from_bytes(G.identity(), serialization.to_bytes(other.identity()))
+
+
+@over_groups
+def test_copy_and_mutate_as_in_jaxlie(G):
+    """jax_dataclasses.copy_and_mutate reassigns a field of a copy, on jaxlie's elements and
+    on ours (also when the element sits inside a user's jdc dataclass); the original and,
+    after the block, the copy stay frozen; a changed shape is refused unless
+    ``validate=False``."""
+    T = random_element(G, 41, (3,), jnp.float32)
+    field = dataclasses.fields(G)[0].name
+    new = to_np(random_element(G, 42, (3,), jnp.float32).parameters())
+    results = []
+    for start in (T, ref_of(T)):
+        with jdc.copy_and_mutate(start) as U:
+            setattr(U, field, jnp.asarray(new))
+        results.append(to_np(U.parameters()))
+        np.testing.assert_array_equal(to_np(start.parameters()), to_np(T.parameters()))
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(U, field, jnp.asarray(new))
+    np.testing.assert_array_equal(results[0], new)
+    np.testing.assert_array_equal(results[1], new)
+    with pytest.raises(ValueError, match=rf"{G.__name__}.{field}: copy_and_mutate needs"):
+        with jdc.copy_and_mutate(T) as U:
+            setattr(U, field, jnp.asarray(new[0]))
+    with jdc.copy_and_mutate(T, validate=False) as U:
+        setattr(U, field, jnp.asarray(new[0]))
+    assert U.get_batch_axes() == ()
+
+    @jdc.pytree_dataclass
+    class State:
+        pose: G  # type: ignore[valid-type]
+        velocity: jax.Array
+
+    state = State(T, jnp.zeros(3))
+    with jdc.copy_and_mutate(state) as moved:
+        setattr(moved.pose, field, jnp.asarray(new))
+    np.testing.assert_array_equal(to_np(moved.pose.parameters()), new)
+    np.testing.assert_array_equal(to_np(state.pose.parameters()), to_np(T.parameters()))
 
 
 # ---------------------------------------------------------------------------------
