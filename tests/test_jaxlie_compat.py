@@ -230,6 +230,19 @@ def test_core_operations_side_by_side(G, dtype):
     assert G(jnp.asarray(noisy)).normalize().parameters().dtype == dtype
     # as_matrix of non-unit parameters: jaxlie's matrices (for SO3, the rotation of q/|q|)
     same(G(jnp.asarray(noisy)).as_matrix(), R(noisy).as_matrix(), "as_matrix non-unit")
+    # The action and composition of non-unit parameters (jaxlie's q p q* scales SO3's by |q|²;
+    # SO2's R p by |z|), and the gradient with respect to raw parameters, radial part
+    # included, which a projected-gradient optimiser follows (jaxlie's se3_optimization).
+    same(G(jnp.asarray(noisy)).apply(p), R(noisy).apply(p), "apply non-unit")
+    same(G(jnp.asarray(noisy)).multiply(U).parameters(), R(noisy).multiply(UR).parameters(),
+         "multiply non-unit")
+    same(G(jnp.asarray(noisy)).inverse().parameters(), R(noisy).inverse().parameters(),
+         "inverse non-unit")
+
+    def raw_grad(lib_G, params):
+        return jax.grad(lambda q: jnp.sum(jnp.sin(lib_G(q).apply(p))))(params)
+
+    same(raw_grad(G, jnp.asarray(noisy)), raw_grad(R, jnp.asarray(noisy)), "grad of apply")
 
 
 @over_dtypes
