@@ -433,6 +433,8 @@ class SO3(SOBase):
 
     @override
     def apply(self, target: hints.Array) -> jax.Array:
+        """Rotate points, shape ``(*batch, 3)``: R(q) p, and for a non-unit q the sandwich
+        q p q* = |q|² R(q/|q|) p, as jaxlie (``rotate``). Batch axes broadcast."""
         R, p = materialize(self, self._check_points(target))
         return R._apply_kernel(p)
 
