@@ -704,12 +704,21 @@ class MatrixLieGroup(abc.ABC):
         return batch[0]
 
     def __repr__(self) -> str:
+        """``SO3(wxyz=[...])``, ``SE3(wxyz=[...], xyz=[...])`` as jaxlie prints them, values
+        rounded to 5 decimals."""
         name = dataclasses.fields(self)[0].name  # type: ignore[arg-type]
         p = self.parameters()
         # Tracers, and the ShapeDtypeStructs of jax.eval_shape, have no values to show.
         if isinstance(p, jax.core.Tracer) or not isinstance(p, (jax.Array, onp.ndarray)):
             return f"{type(self).__name__}({name}={p})"
-        return f"{type(self).__name__}({name}={onp.round(onp.asarray(p), 5)})"
+        p = onp.round(onp.asarray(p), 5)
+        parts = [(name, p)]
+        rotation = getattr(type(self), "_rotation_type", None)
+        if rotation is not None:  # SE: the rotation's field and the translation, jaxlie's labels
+            k = rotation.parameters_dim
+            parts = [(dataclasses.fields(rotation)[0].name, p[..., :k]),
+                     (name.rsplit("_", 1)[1], p[..., k:])]
+        return f"{type(self).__name__}({', '.join(f'{n}={v}' for n, v in parts)})"
 
     # -- shared helpers -------------------------------------------------------------
 

@@ -8,6 +8,8 @@ composition (jaxlie's definition of ``jlog``).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import (
@@ -928,11 +930,16 @@ def test_integer_factories():
 
 @over_groups
 def test_repr_names_the_field_and_rounds_the_values(G):
-    T = G.identity(dtype=jnp.float64)
-    field = {SO2: "unit_complex", SE2: "unit_complex_xy", SO3: "wxyz", SE3: "wxyz_xyz"}[G]
+    """jaxlie's layout: SE groups print the rotation and the translation apart."""
+    T = G.exp(jnp.full(G.tangent_dim, 1e-7, jnp.float64))
+    labels = {SO2: ["unit_complex"], SE2: ["unit_complex", "xy"], SO3: ["wxyz"],
+              SE3: ["wxyz", "xyz"]}[G]
     text = repr(T)
-    assert text.startswith(f"{G.__name__}({field}=[1. 0.")
+    assert text.startswith(f"{G.__name__}({labels[0]}=[1. 0.") and text.endswith("])")
+    assert [part.split("=")[0] for part in text[len(G.__name__) + 1 : -1].split(", ")] == labels
+    assert "e-0" not in text  # rounded to 5 decimals
     assert "Array(" not in text and "dtype" not in text
+    field = dataclasses.fields(G)[0].name
     traced = jax.jit(lambda T: (repr(T), T)[1])  # repr of a traced element does not fail
     traced(T)
     shaped = repr(jax.eval_shape(lambda: G.identity((2,))))  # holds a ShapeDtypeStruct
