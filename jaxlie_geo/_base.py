@@ -124,27 +124,38 @@ def materialize(*xs: Any) -> Any:
 
 
 def _version(text: str) -> Tuple[int, ...]:
-    """The leading numeric components of a version string: "0.12.0.1" -> (0, 12, 0, 1),
-    "0.6.0rc1" -> (0, 6, 0)."""
+    """The leading numeric components of a version string, then −1 for a pre-release
+    (a, b, rc, dev), which precedes the release: "0.12.0.1" -> (0, 12, 0, 1), "0.6.0rc1" ->
+    (0, 6, 0, -1), "0.7.0.dev20250601" -> (0, 7, 0, -1), "0.5.3+cuda12" -> (0, 5, 3). Compare
+    with ``_at_least``."""
     out = []
     for part in text.split("."):
         digits = re.match(r"\d*", part).group()
-        if not digits:
-            break
-        out.append(int(digits))
+        if digits:
+            out.append(int(digits))
         if digits != part:
+            if re.match(r"[-_]?(a|b|c|rc|alpha|beta|pre|preview|dev)\d*$", part[len(digits):], re.I):
+                out.append(-1)
             break
     return tuple(out)
 
 
+def _at_least(text: str, minimum: Tuple[int, ...]) -> bool:
+    """Whether version ``text`` is ``minimum`` or later (missing components count as 0)."""
+    have = _version(text)
+    width = max(len(have), len(minimum))
+    pad = lambda v: v + (0,) * (width - len(v))  # noqa: E731
+    return pad(have) >= pad(minimum)
+
+
 # jax 0.5.3 is the first release with JVP and transpose rules for optimization_barrier
 # (0.4.38 the first with its batching rule); older ones fail on the first grad or vmap.
-if _version(jax.__version__) < (0, 5, 3):
+if not _at_least(jax.__version__, (0, 5, 3)):
     raise ImportError(
         f"jaxlie_geo needs jax >= 0.5.3 (the first release that differentiates "
         f"lax.optimization_barrier); found jax {jax.__version__}."
     )
-_TANGENTS_PASS_THROUGH = _version(jax.__version__) >= (0, 11)
+_TANGENTS_PASS_THROUGH = _at_least(jax.__version__, (0, 11))
 
 
 @jax.custom_jvp

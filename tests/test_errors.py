@@ -225,9 +225,21 @@ def test_jax_older_than_the_minimum_is_refused_at_import():
 
 
 @pytest.mark.parametrize(("text", "want"), [
-    ("0.12.0.1", (0, 12, 0, 1)), ("0.5.3", (0, 5, 3)), ("0.6.0rc1", (0, 6, 0)),
-    ("0.7.0.dev20250601", (0, 7, 0)), ("1.0", (1, 0))])
+    ("0.12.0.1", (0, 12, 0, 1)), ("0.5.3", (0, 5, 3)), ("0.6.0rc1", (0, 6, 0, -1)),
+    ("0.7.0.dev20250601", (0, 7, 0, -1)), ("1.0", (1, 0)), ("0.5.3+cuda12", (0, 5, 3)),
+    ("0.5.3.post1", (0, 5, 3))])
 def test_version_parsing(text, want):
     from jaxlie_geo._base import _version
 
     assert _version(text) == want
+
+
+@pytest.mark.parametrize(("text", "ok"), [
+    ("0.5.3", True), ("0.5.3.post1", True), ("0.5.3+cuda12", True), ("0.6", True),
+    ("0.12.0.1", True), ("0.5.3rc1", False), ("0.5.3.dev20250101", False), ("0.5.2", False),
+    ("0.4.38", False)])
+def test_pre_releases_precede_their_release(text, ok):
+    """A nightly or release candidate of 0.5.3 predates the release's features."""
+    from jaxlie_geo._base import _at_least
+
+    assert _at_least(text, (0, 5, 3)) is ok
