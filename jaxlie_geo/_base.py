@@ -722,7 +722,11 @@ class MatrixLieGroup(abc.ABC):
         # Tracers, and the ShapeDtypeStructs of jax.eval_shape, have no values to show.
         if isinstance(p, jax.core.Tracer) or not isinstance(p, (jax.Array, onp.ndarray)):
             return f"{type(self).__name__}({name}={p})"
-        p = onp.round(onp.asarray(p), 5)
+        p = onp.asarray(p)
+        if p.dtype.itemsize < 4:  # float16's range ends at 65504: rounding via p·10^5 gave NaN
+            p = onp.round(p.astype(onp.float32), 5).astype(p.dtype)
+        else:
+            p = onp.round(p, 5)
         parts = [(name, p)]
         rotation = getattr(type(self), "_rotation_type", None)
         if rotation is not None:  # SE: the rotation's field and the translation, jaxlie's labels

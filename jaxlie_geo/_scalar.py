@@ -479,7 +479,9 @@ def unit(v: jax.Array) -> jax.Array:
     Where ``Σ vᵢ²`` overflows, or is so small (< 2^(emin + p + 2), p the significand's
     bits: float32 2^-100, float64 2^-967) that flushed squares could matter, ``v`` is first
     scaled by a power of two, 2^-(emax/2 + 2) (float32 2^-66) or 2^(3|emin|/4) (float32
-    2^94), which makes the largest square a normal float and keeps the sum finite.
+    2^94; capped so that the scaled sum stays below 2^(emax − 2): float16, whose range is
+    too narrow for both, gets 2^7, and its squares overflowed at 2^10, NaN for components
+    of 0.5), which makes the largest square a normal float and keeps the sum finite.
     Power-of-two scaling is exact, so elsewhere the result is bit for bit the plain
     ``v / √(Σ vᵢ²)``. The plain form returned 0 for a float32 quaternion with components
     of 3e38 and inf/NaN at 1e-30. A zero or non-finite ``v`` (subnormal components count
@@ -489,8 +491,10 @@ def unit(v: jax.Array) -> jax.Array:
     fi = jnp.finfo(v.dtype)
     n2 = sq_norm(v)[..., None]
     big = n2 == jnp.inf
-    small = n2 < 2.0 ** (fi.minexp + fi.nmant + 3)
-    up, down = 2.0 ** (-3 * fi.minexp // 4), 2.0 ** -(fi.maxexp // 2 + 2)
+    small_exp = fi.minexp + fi.nmant + 3
+    small = n2 < 2.0**small_exp
+    up = 2.0 ** min(-3 * fi.minexp // 4, (fi.maxexp - small_exp) // 2 - 1)
+    down = 2.0 ** -(fi.maxexp // 2 + 2)
     scale = jnp.where(big, down, jnp.where(small, up, 1.0)).astype(v.dtype)
     s = v * scale
     n = jnp.sqrt(jnp.where(big | small, sq_norm(s)[..., None], n2))

@@ -603,6 +603,30 @@ def test_half_precision_exp_is_finite_and_close(G, dtype):
     assert np.all(np.abs(to_np(got.astype(jnp.float32)) - ref) <= 4 * eps * scale)
 
 
+@pytest.mark.parametrize("G", [SO2, SO3, SE3], ids=["SO2", "SO3", "SE3"])
+@pytest.mark.parametrize("dtype", [jnp.float16, jnp.bfloat16], ids=["float16", "bfloat16"])
+def test_half_precision_normalize_any_scale(G, dtype):
+    """normalize in float16/bfloat16 at every scale of the rotation part whose squares the
+    dtype can hold after its power-of-two rescaling, against float64 numpy: float16 once
+    returned NaN for rotation parts of norm 0.25 to 0.7 (its rescaled squares overflowed),
+    and repr then printed NaN for any float16 element."""
+    k = {SO2: 2, SO3: 4, SE3: 4}[G]
+    p = np.asarray(random_element(G, 3, (8,), np.float32).parameters())
+    fi = jnp.finfo(dtype)
+    for log2 in range(-6, 14, 1):
+        scaled = p.copy()
+        scaled[..., :k] *= 2.0**log2 * 0.7
+        x = jnp.asarray(scaled, dtype)
+        xr = np.asarray(x.astype(jnp.float32), np.float64)
+        want = xr.copy()
+        want[..., :k] /= np.linalg.norm(xr[..., :k], axis=-1, keepdims=True)
+        got = G(x).normalize().parameters()
+        assert got.dtype == dtype
+        err = np.abs(np.asarray(got.astype(jnp.float32), np.float64) - want)
+        assert np.all(err <= 2 * float(fi.eps) * np.maximum(1.0, np.abs(want))), (log2, err.max())
+    assert "nan" not in repr(G(jnp.asarray(p, dtype)))
+
+
 @pytest.fixture
 def small_chunks(monkeypatch):
     """``in_chunks`` with 256-element chunks from 512 elements on, so that a test-sized
