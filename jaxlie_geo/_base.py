@@ -669,23 +669,47 @@ class MatrixLieGroup(abc.ABC):
 
     def __getitem__(self, index: Any) -> Self:
         """Index the batch axes: ``T[0]``, ``T[:, 1]``, ``T[mask]``, ``T[..., None]``. A static
-        integer out of range raises ``IndexError``, as in NumPy (JAX would clamp it, and
-        Python's iteration fallback relies on the error); traced indices clamp, as in JAX."""
+        index out of range (a Python or NumPy integer, or a list or NumPy array of them, also
+        after ``...``) raises ``IndexError``, as in NumPy (JAX would clamp it, and Python's
+        iteration fallback relies on the error); jax arrays and traced indices clamp, as in
+        JAX."""
         p = jnp.moveaxis(self.parameters(), -1, 0)
         index = index if isinstance(index, tuple) else (index,)
-        batch, axis = self.get_batch_axes(), 0
-        for i in index:  # the leading static integers and slices; arrays and ... end it
+        batch = self.get_batch_axes()
+
+        def static(i: Any) -> Optional[onp.ndarray]:
+            if isinstance(i, (list, onp.ndarray, onp.integer)) or (
+                isinstance(i, int) and not isinstance(i, bool)
+            ):
+                a = onp.asarray(i)
+                return a if a.dtype.kind in "iub" else None
+            return None
+
+        def width(i: Any) -> int:  # batch axes an entry consumes
+            if i is None or i is Ellipsis:
+                return 0
+            a = static(i) if not isinstance(i, jax.Array) else i
+            return a.ndim if a is not None and a.dtype == bool else 1
+
+        checked = list(index)
+        if sum(i is Ellipsis for i in checked) == 1:
+            at = checked.index(Ellipsis)
+            rest = len(batch) - sum(width(i) for i in checked)
+            checked[at : at + 1] = [slice(None)] * max(rest, 0)
+        axis = 0
+        for i in checked:  # static entries, from the left; a jax array ends the check
             if i is None:
                 continue
-            if isinstance(i, (int, onp.integer)) and not isinstance(i, bool):
-                if axis >= len(batch) or not -batch[axis] <= i < batch[axis]:
+            a = None if isinstance(i, slice) else static(i)
+            if not isinstance(i, slice) and a is None:
+                break
+            if a is not None and a.dtype != bool:
+                if axis >= len(batch) or not onp.all((-batch[axis] <= a) & (a < batch[axis])):
                     raise IndexError(
                         f"{type(self).__name__}: index {i} is out of range for batch axes "
                         f"{batch} (axis {axis})."
                     )
-            elif not isinstance(i, slice):
-                break
-            axis += 1
+            axis += width(i)
         return type(self)(jnp.moveaxis(p[(slice(None), *index)], 0, -1))
 
     def __iter__(self) -> Iterator[Self]:

@@ -579,11 +579,18 @@ def test_iteration_truthiness_and_static_index_range(G):
         list(T[0, 0])
     assert bool(T) and bool(G.identity())  # jaxlie's elements are always true
     # static integers out of range raise, as in NumPy (JAX alone would clamp to the end)
-    for index in (3, -4, (0, 2), (slice(None), -3), (None, 5)):
+    # (also after ..., and in static integer lists and NumPy arrays; these once clamped)
+    for index in (3, -4, (0, 2), (slice(None), -3), (None, 5), (..., 2), (..., -3), (0, ..., 5),
+                  [3], np.array([0, 3]), ([0, 1], ..., [2]), (0, 1, 0)):
         with pytest.raises(IndexError, match="out of range"):
             T[index]
     np.testing.assert_array_equal(to_np(T[-3, -2].parameters()), p[0, 0])
     np.testing.assert_array_equal(to_np(T[None, 2].parameters()), p[None, 2])
+    for index in ((..., 1), (..., -2), (2, ..., 1), (None, ..., 0, None), [2, 0], np.array([-3, 1]),
+                  ([0, 2], ..., [1, 0]), (p[..., 0] > 0,), (..., np.array([True, False]))):
+        idx = index if isinstance(index, tuple) else (index,)
+        want = np.moveaxis(np.moveaxis(p, -1, 0)[(slice(None), *idx)], 0, -1)  # NumPy's rules
+        np.testing.assert_array_equal(to_np(T[index].parameters()), want)
 
 
 @pytest.mark.parametrize("G", [SO3, SE3], ids=["SO3", "SE3"])
