@@ -351,10 +351,17 @@ def _checking_elements(fn: Any, where: str) -> Any:
     """``fn`` preceded by ``check_elements`` on its arguments (``self``, ``other``).
     Constructors cannot check (JAX rebuilds pytrees with shapes, tracers, None, and
     ``jax.jacfwd`` of a group-valued function returns an element holding a Jacobian), so
-    the operations do. Runs at trace time only."""
+    the operations do. A method's other elements (``multiply``, ``interpolate``) must be of
+    ``self``'s group: ``TypeError`` (an SE3 passed to ``SO3.multiply`` raised
+    ``AttributeError: 'SE3' object has no attribute 'wxyz'``). Runs at trace time only."""
 
     @functools.wraps(fn)
     def checked(*args: Any, **kwargs: Any) -> Any:
+        if args and isinstance(args[0], MatrixLieGroup):
+            G = type(args[0])
+            for a in (*args[1:], *kwargs.values()):
+                if isinstance(a, MatrixLieGroup) and type(a) is not G:
+                    raise TypeError(f"{where}: expected {G.__name__}, got {type(a).__name__}.")
         check_elements(where, *args, *kwargs.values())
         return fn(*args, **kwargs)
 

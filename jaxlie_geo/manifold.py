@@ -12,7 +12,7 @@ from typing import Any, Callable, Sequence, Union
 import jax
 import jax.numpy as jnp
 
-from ._base import MatrixLieGroup
+from ._base import MatrixLieGroup, check_elements
 
 TangentPytree = Any
 """The pytree of tangents of a pytree of elements (arrays in place of groups)."""
@@ -116,6 +116,7 @@ def rplus_jacobian_parameters_wrt_delta(transform: MatrixLieGroup) -> jax.Array:
             f"rplus_jacobian_parameters_wrt_delta: expected a group element, got "
             f"{type(transform).__name__}."
         )
+    check_elements("manifold.rplus_jacobian_parameters_wrt_delta", transform)
     return transform._rplus_jacobian()
 
 

@@ -39,6 +39,13 @@ def _shape_cases():
             (f"{g}.vee-square", G.vee, (3, n + 1, n + 1), (n, n), "vee"),
             (f"{g}.jac_right", G.jac_right, (k + 1,), (k,), "jac_right"),
             (f"{g}.jac_right_inv", G.jac_right_inv, (2, k + 1), (k,), "jac_right_inv"),
+            (
+                f"{g}.rplus_jacobian_parameters_wrt_delta",  # once read the first entries
+                lambda p, G=G: jaxlie_geo.manifold.rplus_jacobian_parameters_wrt_delta(G(p)),
+                (G.parameters_dim + 1,),
+                (G.parameters_dim,),
+                "rplus_jacobian_parameters_wrt_delta",
+            ),
         ]
         if is_se(G):
             Rot = {SE2: SO2, SE3: SO3}[G]
@@ -162,6 +169,18 @@ def test_mixing_groups_raises_type_error(G):
         jaxlie_geo.stack([T, U])
     with pytest.raises(ValueError):
         jaxlie_geo.stack([])
+    # the methods and functions that take a second element name both groups (they raised
+    # AttributeError from inside the kernel: "'SE3' object has no attribute 'wxyz'")
+    from jaxlie_geo import jacobians, manifold, uncertainty
+
+    msg = f"expected {G.__name__}, got {other.__name__}"
+    for call in (lambda: T.multiply(U), lambda: T.interpolate(U, 0.5),
+                 lambda: jax.jit(lambda: T.multiply(U))(), lambda: jacobians.compose(T, U),
+                 lambda: jacobians.between(T, U), lambda: jacobians.rminus(T, U),
+                 lambda: manifold.rminus(T, U),
+                 lambda: uncertainty.mean(G.identity((2,)), init=U)):
+        with pytest.raises(TypeError, match=msg):
+            call()
 
 
 @over_groups
