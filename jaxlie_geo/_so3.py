@@ -274,20 +274,26 @@ class SO3(SOBase):
         )
 
     def compute_roll_radians(self) -> jax.Array:
-        """Roll (rotation about x) of the ZYX convention, in (-π, π]."""
+        """Roll (rotation about x) of the ZYX convention, in (-π, π]. Like ``as_matrix``, it
+        depends on the quaternion's direction only: atan2(2(wx + yz), w² + z² − x² − y²),
+        where jaxlie's 1 − 2(x² + y²) assumes a unit quaternion."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+        return jnp.arctan2(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))
 
     def compute_pitch_radians(self) -> jax.Array:
-        """Pitch (rotation about y) of the ZYX convention, in [-π/2, π/2]. The sine is
-        clipped to [-1, 1], so rounding at gimbal lock gives ±π/2, never NaN."""
+        """Pitch (rotation about y) of the ZYX convention, in [-π/2, π/2]:
+        asin(2(wy − zx)/‖q‖²), direction only (a quaternion 5% long read π/2 for a pitch of
+        1.3 when the unit formula was clipped). The sine is clipped to [-1, 1], so rounding
+        at gimbal lock gives ±π/2, never NaN."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+        n2 = (w * w + x * x) + (y * y + z * z)
+        return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x) / n2, -1.0, 1.0))
 
     def compute_yaw_radians(self) -> jax.Array:
-        """Yaw (rotation about z) of the ZYX convention, in (-π, π]."""
+        """Yaw (rotation about z) of the ZYX convention, in (-π, π]; direction only:
+        atan2(2(wz + xy), w² + x² − y² − z²)."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        return jnp.arctan2(2.0 * (w * z + x * y), (w * w + x * x) - (y * y + z * z))
 
     @classmethod
     @override

@@ -1150,3 +1150,26 @@ def test_exp_derivative_takes_one_kernel(G, dtype):
     np.testing.assert_allclose(
         to_np(jax.grad(loss)(xi, w)), to_np(jax.vmap(jax.grad(loss))(xi, w)), rtol=0, atol=16 * eps
     )
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64], ids=["float32", "float64"])
+def test_rpy_depends_on_the_quaternion_direction_only(dtype):
+    """compute_roll/pitch/yaw_radians of a scaled quaternion equal those of the unit one, and
+    scipy's intrinsic ZYX angles of the same rotation (as ``as_matrix`` reads it). The unit
+    formulas read π/2 for a pitch of 1.3 from a quaternion 5% long (the clipped sine)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(5)
+    rpy = rng.uniform([-3.0, -1.5, -3.0], [3.0, 1.5, 3.0], size=(64, 3))
+    q = np.asarray(SO3.from_rpy_radians(*jnp.asarray(rpy.T, dtype)).wxyz, np.float64)
+    ref = Rotation.from_quat(np.roll(q, -1, axis=-1)).as_euler("ZYX")[:, ::-1]
+    eps = float(np.finfo(dtype).eps)
+    for scale in (1.0, 0.5, 1.05, 2.0, 1e3):
+        R = SO3(jnp.asarray(q * scale, dtype))
+        got = np.stack([np.asarray(R.compute_roll_radians()), np.asarray(R.compute_pitch_radians()),
+                        np.asarray(R.compute_yaw_radians())], -1).astype(np.float64)
+        # pitch is ill-conditioned near ±π/2 (asin): compare its sine there
+        err = np.abs(got - ref)
+        err[:, 1] = np.abs(np.sin(got[:, 1]) - np.sin(ref[:, 1])) / np.maximum(
+            np.cos(ref[:, 1]), 1e-3)
+        assert err.max() <= 16 * eps, (scale, err.max() / eps)
