@@ -50,4 +50,4 @@ def geodesic(start: GroupT, end: GroupT) -> Geodesic[GroupT]:
             f"geodesic: endpoints must be the same group, got {type(start).__name__} "
             f"and {type(end).__name__}."
         )
-    return Geodesic(start, start.inverse().multiply(end).log())
+    return Geodesic(start, start._between(end).log())

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array, pytree_dataclass
+from ._base import SEBase, as_float_array, check_batches, pytree_dataclass
 from ._so2 import SO2
 
 _I2, _ROT90, _E02, _E12, _E22 = (
@@ -50,7 +50,8 @@ class SE2(SEBase[SO2]):
         x = as_float_array(x, "x", (), "SE2.from_xy_theta")
         y = as_float_array(y, "y", (), "SE2.from_xy_theta")
         theta = as_float_array(theta, "theta", (), "SE2.from_xy_theta")
-        x, y, theta = jnp.broadcast_arrays(x, y, theta)
+        batch = check_batches("SE2.from_xy_theta", "shapes of x, y, theta", x.shape, y.shape, theta.shape)
+        x, y, theta = (jnp.broadcast_to(a, batch) for a in (x, y, theta))
         return SE2.from_rotation_and_translation(
             SO2.from_radians(theta), jnp.stack([x, y], axis=-1)
         )

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as onp
 
 from . import hints
-from ._base import MatrixLieGroup, SEBase, as_float_array, jit_function
+from ._base import MatrixLieGroup, SEBase, as_float_array, check_batches, jit_function
 from ._so2 import SO2
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
@@ -71,7 +71,7 @@ def inverse(a: GroupT) -> jax.Array:
 @jit_function()
 def between(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``a⁻¹ @ b`` w.r.t. ``a`` and ``b``: ``(−Ad(b⁻¹ a), I)``."""
-    return _broadcast(-(b.inverse().multiply(a)).adjoint(), _eye_like(a.inverse().multiply(b)))
+    return _broadcast(-b._between(a).adjoint(), _eye_like(a._between(b)))
 
 
 @jit_function()
@@ -81,7 +81,7 @@ def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     42–50 ns/element through ``jac_left_inv``/``jac_right_inv``, 17–22 through ``jlog``
     and J_l⁻¹ = J_r⁻¹ᵀ."""
     G = type(a)
-    e = a.inverse().multiply(b)
+    e = a._between(b)
     J_r_inv = e.jlog()  # the log is principal: the groups' faster jlog applies
     if not isinstance(e, SEBase):  # rotation groups: J_l(τ) = J_r(τ)ᵀ
         return -jnp.swapaxes(J_r_inv, -1, -2), J_r_inv
@@ -92,7 +92,9 @@ def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
 def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``a @ exp(δ)`` w.r.t. ``a`` and ``δ``: ``(Ad(exp(−δ)), J_r(δ))``."""
     G = type(a)
-    delta = G._check_tangent(delta, "rplus")
+    delta = G._check_tangent(delta, "rplus", like=a.parameters())
+    check_batches("jacobians.rplus", "batch axes of the element and `delta`",
+                  a.get_batch_axes(), delta.shape[:-1])
     J_a, J_d = _broadcast(G.exp(-delta).adjoint(), G.jac_right(delta))
     J_a, _ = _broadcast(J_a, _eye_like(a))  # the element's batch axes broadcast too
     return _broadcast(J_a, J_d)

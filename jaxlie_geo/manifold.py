@@ -40,7 +40,7 @@ def rminus(a: Any, b: Any) -> TangentPytree:
     """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays: the
     result δ satisfies ``rplus(a, δ) = b`` for every leaf. (jaxlie 1.5 takes the same
     argument order for groups but returns ``a − b`` for array leaves.)"""
-    return _map(lambda A, B: A.inverse().multiply(B).log(), lambda x, y: y - x, a, b)
+    return _map(lambda A, B: A._between(B).log(), lambda x, y: y - x, a, b)
 
 
 def zero_tangents(pytree: Any) -> TangentPytree:

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array, jit_function, pytree_dataclass
+from ._base import MatrixLieGroup, as_float_array, check_batches, jit_function, pytree_dataclass
 from ._geodesic import Geodesic
 from ._se2 import SE2
 
@@ -50,7 +50,9 @@ def velocity_between(start: GroupT, end: GroupT, duration: hints.Scalar) -> jax.
     duration = as_float_array(duration, "duration", (), "velocity_between")
     if not isinstance(duration, jax.core.Tracer) and bool(jnp.any(duration == 0)):
         raise ValueError("velocity_between: `duration` must be non-zero.")
-    tangent = start.inverse().multiply(end).log()
+    tangent = start._between(end).log()
+    check_batches("velocity_between", "batch axes of the poses and `duration`",
+                  tangent.shape[:-1], duration.shape)
     return tangent / duration[..., None].astype(tangent.dtype)
 
 
@@ -67,7 +69,7 @@ def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
             ``interpolate`` (a batch of times on one body: ``t`` of shape (K,)).
     """
     G = type(start)
-    velocity = G._check_tangent(velocity, "pose_at")
+    velocity = G._check_tangent(velocity, "pose_at", like=start.parameters())
     return Geodesic(start, velocity)(t)
 
 
@@ -112,7 +114,8 @@ def arc(start: SE2, velocity: hints.Array) -> Arc:
     """
     if not isinstance(start, SE2):
         raise TypeError(f"arc: `start` must be SE2, got {type(start).__name__}.")
-    xi = SE2._check_tangent(velocity, "arc")
+    xi = SE2._check_tangent(velocity, "arc", like=start.parameters())
+    check_batches("arc", "batch axes of `start` and `velocity`", start.get_batch_axes(), xi.shape[:-1])
     v, omega = xi[..., :2], xi[..., 2]
     u = start.rotation().apply(v)
     p0 = start.translation()

@@ -16,7 +16,14 @@ import jax
 import jax.numpy as jnp
 
 from . import hints, jacobians
-from ._base import MatrixLieGroup, as_float_array, jit_function, matmul, resolve_dtype
+from ._base import (
+    MatrixLieGroup,
+    as_float_array,
+    check_batches,
+    jit_function,
+    matmul,
+    resolve_dtype,
+)
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
@@ -26,8 +33,17 @@ def _sandwich(J: jax.Array, cov: jax.Array) -> jax.Array:
 
 
 def _check_cov(T: MatrixLieGroup, cov: hints.Array, name: str, where: str) -> jax.Array:
+    """``cov`` as a float array of shape ``(*batch, k, k)``, integers promoted to ``T``'s
+    dtype."""
     k = T.tangent_dim
-    return as_float_array(cov, name, (k, k), where)
+    return as_float_array(cov, name, (k, k), where, like=T.parameters())
+
+
+def _check_broadcast(where: str, *items: Any) -> None:
+    """Elements' batch axes and covariances' leading axes broadcast together, else a
+    ``ValueError`` naming ``where`` (not matmul's "Incompatible types")."""
+    shapes = [x.get_batch_axes() if isinstance(x, MatrixLieGroup) else x.shape[:-2] for x in items]
+    check_batches(where, "batch axes of the elements and covariances", *shapes)
 
 
 @jit_function()
@@ -43,10 +59,12 @@ def propagate_compose(
     (default: independent)."""
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_compose")
     cov_b = _check_cov(b, cov_b, "cov_b", "propagate_compose")
+    _check_broadcast("propagate_compose", a, b, cov_a, cov_b)
     J_a, J_b = jacobians.compose(a, b)
     out = _sandwich(J_a, cov_a) + _sandwich(J_b, cov_b)
     if cov_ab is not None:
         cov_ab = _check_cov(a, cov_ab, "cov_ab", "propagate_compose")
+        _check_broadcast("propagate_compose", a, b, cov_a, cov_b, cov_ab)
         cross = matmul(matmul(J_a, cov_ab), jnp.swapaxes(J_b, -1, -2))
         out = out + cross + jnp.swapaxes(cross, -1, -2)
     return out
@@ -56,6 +74,7 @@ def propagate_compose(
 def propagate_inverse(a: GroupT, cov_a: hints.Array) -> jax.Array:
     """Covariance of ``a⁻¹``: ``Ad(a) Σ Ad(a)ᵀ``."""
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_inverse")
+    _check_broadcast("propagate_inverse", a, cov_a)
     return _sandwich(jacobians.inverse(a), cov_a)
 
 
@@ -67,10 +86,14 @@ def propagate_apply(
     the pose's tangent covariance and, optionally, the point's own."""
     cov_T = _check_cov(T, cov_T, "cov_T", "propagate_apply")
     J_T, J_p = jacobians.apply(T, points)
+    _check_broadcast("propagate_apply", J_T, cov_T)
     out = _sandwich(J_T, cov_T)
     if cov_points is not None:
         d = T.space_dim
-        cov_points = as_float_array(cov_points, "cov_points", (d, d), "propagate_apply")
+        cov_points = as_float_array(
+            cov_points, "cov_points", (d, d), "propagate_apply", like=T.parameters()
+        )
+        _check_broadcast("propagate_apply", J_T, cov_T, cov_points)
         out = out + _sandwich(J_p, cov_points)
     return out
 
@@ -81,7 +104,8 @@ def sample(
     cov: hints.Array,
     batch_axes: Tuple[int, ...] = (),
 ) -> GroupT:
-    """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky).
+    """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky). Σ must be
+    symmetric positive definite: otherwise the factor, and so the samples, are NaN.
 
     Returns a batch of shape ``(*batch_axes, *mean.get_batch_axes())``."""
     return _sample(key, mean, cov, tuple(batch_axes))
@@ -97,7 +121,9 @@ def _sample(
     cov = _check_cov(mean, cov, "cov", "sample")
     G = type(mean)
     dtype = jnp.result_type(mean.parameters(), cov)
-    L = jnp.linalg.cholesky(cov.astype(dtype))
+    # XLA has no half-precision Cholesky: factor in float32
+    L = jnp.linalg.cholesky(cov.astype(jnp.promote_types(dtype, jnp.float32))).astype(dtype)
+    _check_broadcast("sample", mean, cov)
     batch = jnp.broadcast_shapes(mean.get_batch_axes(), L.shape[:-2])
     z = jax.random.normal(key, (*batch_axes, *batch, G.tangent_dim), dtype=resolve_dtype(dtype))
     return mean.multiply(G.exp(matmul(L, z[..., None])[..., 0]))
@@ -118,15 +144,19 @@ def mean(
 
     Args:
         poses: elements with batch ``(N, *rest)``; the mean is taken over the N axis.
-        weights: shape ``(N,)``, non-negative; normalised to sum 1 (default: uniform).
-        init: starting point, batch ``rest`` (default: ``poses[0]``).
+        weights: shape ``(N,)``, normalised to sum 1 (default: uniform); their sum must not
+            be zero (it gives NaN). Negative weights give the affine combination.
+        init: starting point, batch broadcasting to ``rest``, cast to the poses' dtype
+            (default: ``poses[0]``).
         tol: stop once every element's update is below it, largest component (default:
             10·eps of the dtype); a positive Python number. Elements whose update is NaN
             (NaN among their poses) do not hold the others back; their mean is NaN.
         max_iters: cap on the iterations (jit-able ``lax.while_loop``).
     Returns:
         The mean, batch ``rest``. Meaningful when the poses lie within a ball where
-        ``log`` is unique (rotations less than π apart).
+        ``log`` is unique (rotations less than π apart). Forward-mode derivatives
+        (``jax.jvp``, ``jax.jacfwd``) pass through the iteration; reverse mode
+        (``jax.grad``) does not, as for any ``lax.while_loop``.
     """
     G = type(poses)
     n = poses.get_batch_axes()[0] if poses.get_batch_axes() else None
@@ -145,11 +175,21 @@ def mean(
     tol_ = float(10 * jnp.finfo(dtype).eps) if tol is None else float(tol)
     if not tol_ > 0 or tol_ == float("inf"):
         raise ValueError(f"mean: `tol` must be a positive finite number, got {tol}.")
-    mu0 = poses[0] if init is None else init
+    if init is None:
+        mu0 = poses[0]
+    else:
+        rest = poses.get_batch_axes()[1:]
+        both = check_batches("mean", "batch axes of `init` and of the poses' rest", init.get_batch_axes(), rest)
+        if tuple(both) != tuple(rest):
+            raise ValueError(
+                f"mean: `init` batch axes {init.get_batch_axes()} must broadcast to the poses' "
+                f"rest {rest}."
+            )
+        mu0 = G(jnp.broadcast_to(init.parameters().astype(dtype), (*rest, G.parameters_dim)))
     extra = (1,) * (poses.parameters().ndim - 2)
 
     def step(mu: GroupT) -> Tuple[GroupT, jax.Array]:
-        r = mu.inverse()[None].multiply(poses).log()  # (N, *rest, k)
+        r = mu[None]._between(poses).log()  # (N, *rest, k)
         delta = jnp.sum(w.reshape((n, *extra, 1)) * r, axis=0)
         # NaN updates are left out of the stopping test (a NaN compares false, and one
         # element's NaN would otherwise stop every other element after one step).

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from .hints import Array
 
 if TYPE_CHECKING:
-    from ._base import MatrixLieGroup
+    from ._base import MatrixLieGroup, check_batches
 
 T = TypeVar("T", bound="MatrixLieGroup")
 
@@ -52,7 +52,7 @@ def broadcast_leading_axes(inputs: TupleOfBroadcastable) -> TupleOfBroadcastable
     Arrays are taken as ``(*batch, d)`` (last axis kept); group elements as their
     parameters. Returns a tuple of the same kinds in the same order.
     """
-    from ._base import MatrixLieGroup
+    from ._base import MatrixLieGroup, check_batches
 
     arrays = [x.parameters() if isinstance(x, MatrixLieGroup) else jnp.asarray(x) for x in inputs]
     for i, a in enumerate(arrays):
@@ -60,7 +60,7 @@ def broadcast_leading_axes(inputs: TupleOfBroadcastable) -> TupleOfBroadcastable
             raise ValueError(
                 f"broadcast_leading_axes: input {i} must have shape (*batch, d), got {a.shape}."
             )
-    batch = jnp.broadcast_shapes(*(a.shape[:-1] for a in arrays))
+    batch = check_batches("broadcast_leading_axes", "batch axes", *(a.shape[:-1] for a in arrays))
     out = tuple(
         type(x)(jnp.broadcast_to(a, (*batch, a.shape[-1])))
         if isinstance(x, MatrixLieGroup)

@@ -239,6 +239,30 @@ def log_ref(group: str, p: Sequence[float]) -> List[mp.mpf]:
     return [t[i] - wxt[i] / 2 + g * wwxt[i] for i in range(3)] + w
 
 
+def compose_ref(group: str, pa: Sequence, pb: Sequence, invert_a: bool = False) -> List[mp.mpf]:
+    """Exact parameters of a @ b (``invert_a``: a⁻¹ @ b) for SE2/SE3, from the (stored)
+    parameters, rotation parts taken as their normalized directions."""
+    pa, pb = _mpf_list(pa), _mpf_list(pb)
+    k = 2 if group == "SE2" else 4
+    qa = [c / _norm(pa[:k]) for c in pa[:k]]
+    qb = [c / _norm(pb[:k]) for c in pb[:k]]
+    R = params_to_matrix("SO2" if k == 2 else "SO3", qa)
+    ta, tb = pa[k:], pb[k:]
+    if invert_a:
+        qa = [qa[0]] + [-c for c in qa[1:]]
+        R = R.T
+        tb = [y - x for x, y in zip(ta, tb)]
+        ta = [mp.mpf(0)] * len(ta)
+    if k == 2:
+        q = [qa[0] * qb[0] - qa[1] * qb[1], qa[0] * qb[1] + qa[1] * qb[0]]
+    else:
+        (w1, x1, y1, z1), (w2, x2, y2, z2) = qa, qb
+        q = [w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+             w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2]
+    t = [mp.fsum(R[i, j] * tb[j] for j in range(len(tb))) + ta[i] for i in range(len(tb))]
+    return q + t
+
+
 def hat(group: str, x: Sequence) -> mp.matrix:
     """Lie algebra matrix of a tangent (jaxlie ordering: translation first)."""
     x = _mpf_list(x)

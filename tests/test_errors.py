@@ -262,3 +262,98 @@ def test_pre_releases_precede_their_release(text, ok):
     from jaxlie_geo._base import _at_least
 
     assert _at_least(text, (0, 5, 3)) is ok
+
+
+def test_batch_mismatches_name_the_function():
+    """Batch axes that cannot broadcast raise ``ValueError`` naming the function and the
+    shapes (they raised jax.numpy's "Incompatible shapes for broadcasting" or matmul's
+    "Incompatible types", naming neither)."""
+    from jaxlie_geo import jacobians, motion, uncertainty, utils
+
+    T3 = SE3.exp(np.zeros((3, 6), np.float32))
+    S3 = SE2.exp(np.zeros((3, 3), np.float32))
+    cov4 = np.broadcast_to(np.eye(6, dtype=np.float32), (4, 6, 6))
+    cases = {
+        "SE3.from_rotation_and_translation": lambda: SE3.from_rotation_and_translation(
+            T3.rotation(), np.zeros((4, 3), np.float32)),
+        "SE2.from_xy_theta": lambda: SE2.from_xy_theta(np.zeros(3), np.zeros(4), 0.0),
+        "propagate_compose": lambda: uncertainty.propagate_compose(T3, cov4, T3, np.eye(6)),
+        "propagate_inverse": lambda: uncertainty.propagate_inverse(T3, cov4),
+        "propagate_apply": lambda: uncertainty.propagate_apply(
+            T3, np.eye(6), np.zeros(3), np.ones((4, 3, 3))),
+        "sample": lambda: uncertainty.sample(jax.random.PRNGKey(0), T3, cov4),
+        "velocity_between": lambda: motion.velocity_between(T3, T3, np.ones(4)),
+        "jacobians.rplus": lambda: jacobians.rplus(T3, np.zeros((4, 6))),
+        "broadcast_leading_axes": lambda: utils.broadcast_leading_axes((T3, np.zeros((4, 3)))),
+        "arc": lambda: motion.arc(S3, np.zeros((4, 3))),
+        "mean": lambda: uncertainty.mean(SE3.exp(np.zeros((5, 3, 6), np.float32)),
+                                         init=SE3.identity((5, 3))),
+    }
+    for name, call in cases.items():
+        with pytest.raises(ValueError, match=re.escape(name) + r".*do not broadcast|"
+                           + re.escape(name) + r".*must broadcast") as info:
+            call()
+        assert "(3" in str(info.value), (name, str(info.value))
+
+
+def test_se_constructors_name_what_they_got():
+    """``from_rotation`` given an array, or another library's SO3, says so (it raised
+    AttributeError on a tracer, and "must be SO3, got SO3")."""
+    import jaxlie
+
+    with pytest.raises(TypeError, match=r"SE3.from_rotation: .*array of shape \(4,\)"):
+        SE3.from_rotation(jnp.zeros(4))
+    with pytest.raises(TypeError, match=r"must be jaxlie_geo\.\S*SO3, got jaxlie\.\S*SO3"):
+        SE3.from_rotation_and_translation(jaxlie.SO3.identity(), jnp.zeros(3))
+
+
+@pytest.mark.parametrize("x64", [False, True])
+def test_integer_inputs_take_the_elements_dtype(x64):
+    """Integer covariances, velocities and tangent increments combined with a float32 element
+    give float32, as integer points and translations do (they were promoted to the default
+    float: float64 under x64)."""
+    from jaxlie_geo import jacobians, motion, uncertainty
+
+    with _x64(x64):
+        T = SE3.exp(jnp.zeros(6, jnp.float32))
+        S = SE2.exp(jnp.zeros(3, jnp.float32))
+        eye = np.eye(6, dtype=np.int32)
+        outs = [
+            uncertainty.propagate_compose(T, eye, T, eye, eye),
+            uncertainty.propagate_inverse(T, eye),
+            uncertainty.propagate_apply(T, eye, np.zeros(3, np.int32), np.eye(3, dtype=np.int32)),
+            uncertainty.sample(jax.random.PRNGKey(0), T, eye).parameters(),
+            motion.pose_at(T, np.ones(6, np.int32), 2.0).parameters(),
+            motion.arc(S, np.ones(3, np.int32)).centre,
+            *jacobians.rplus(T, np.ones(6, np.int32)),
+        ]
+        assert [o.dtype for o in outs] == [jnp.float32] * len(outs)
+
+
+def _x64(on):
+    from _mpref import x64_for
+
+    return x64_for("float64" if on else "float32")
+
+
+def test_odd_parameter_dtypes_and_reshape_sizes():
+    """Complex parameters are refused by the operations (they returned complex silently);
+    integer parameters normalize to the default float (they raised "not inexact"), as
+    jaxlie's do; NumPy integers are sizes for reshape; float16 poses can be sampled
+    (XLA has no half-precision Cholesky)."""
+    from jaxlie_geo import uncertainty
+
+    with pytest.raises(ValueError, match=r"SO3.log: SO3 parameters must be real, got dtype complex64"):
+        SO3(jnp.array([1j, 0, 0, 0], jnp.complex64)).log()
+    with pytest.raises(ValueError, match="must be real"):
+        SE2(jnp.zeros(4, jnp.complex64)).as_matrix()
+    N = SO3(jnp.array([2, 0, 0, 0])).normalize()
+    assert jnp.issubdtype(N.wxyz.dtype, jnp.floating)
+    np.testing.assert_array_equal(np.asarray(N.wxyz), [1.0, 0.0, 0.0, 0.0])
+    assert SE3.identity((6,)).reshape(np.int64(2), 3).get_batch_axes() == (2, 3)
+    assert SE3.identity((6,)).reshape(np.int64(6)).get_batch_axes() == (6,)
+    T = uncertainty.sample(jax.random.PRNGKey(0), SE3.identity(dtype=jnp.float16),
+                           0.01 * jnp.eye(6, dtype=jnp.float16), batch_axes=(64,))
+    p = T.parameters()
+    assert p.dtype == jnp.float16 and bool(jnp.all(jnp.isfinite(p)))
+    assert 0.03 < float(jnp.std(p[:, 4:].astype(jnp.float32))) < 0.2  # σ = 0.1
