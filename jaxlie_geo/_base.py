@@ -299,6 +299,10 @@ def _register_flax_state(cls: type, names: Tuple[str, ...]) -> None:
 # jit-wrapping of public methods.
 
 _NOT_JITTED = frozenset({"get_batch_axes", "parameters", "reshape"})
+_JITTED_PRIVATE = {"_between": "relative element (a⁻¹ @ b)"}
+"""Private methods that public functions call eagerly (``manifold.rminus``, ``geodesic``),
+jitted too, with the name their error messages use: unjitted, an eager SE3 ``rminus`` of
+100 poses took 1.7 ms (one dispatch per primitive) against 90 µs."""
 _STATIC_NAMES = ("batch_axes", "dtype")
 
 
@@ -390,7 +394,7 @@ def _jit_public_methods(cls: type) -> None:
     ``.trace`` and ``.eval_shape`` work (ahead-of-time compilation). A subclass rebinds it.
     """
     for name in dir(cls):
-        if name.startswith("_") or name in _NOT_JITTED:
+        if (name.startswith("_") and name not in _JITTED_PRIVATE) or name in _NOT_JITTED:
             continue
         raw = inspect.getattr_static(cls, name)
         bound_of = getattr(getattr(raw, "__func__", None), "_classmethod", None)
@@ -405,7 +409,8 @@ def _jit_public_methods(cls: type) -> None:
         sig = inspect.signature(fn)
         names = list(sig.parameters)
         static = tuple(n for n in _STATIC_NAMES if n in names)
-        checked = _checking_elements(fn, f"{cls.__name__}.{name}")
+        where = f"{cls.__name__} {_JITTED_PRIVATE[name]}" if name in _JITTED_PRIVATE else f"{cls.__name__}.{name}"
+        checked = _checking_elements(fn, where)
         if kind is classmethod:
             checked = functools.partial(checked, cls)
             sig = sig.replace(parameters=list(sig.parameters.values())[1:])
@@ -567,15 +572,9 @@ class MatrixLieGroup(abc.ABC):
     def inverse(self) -> Self:
         """Group inverse."""
 
-    def _check_between(self, other: Any) -> None:
-        where = f"{type(self).__name__} relative element (a⁻¹ @ b)"
-        _check_same_group(where, self, other)
-        check_elements(where, self, other)
-
     def _between(self, other: Self) -> Self:
         """``self⁻¹ @ other``, the relative element of pose graphs, geodesics and
         ``rminus`` (batch axes broadcast; ``TypeError`` for another group)."""
-        self._check_between(other)
         return self.inverse().multiply(other)
 
     @abc.abstractmethod
@@ -699,8 +698,8 @@ class MatrixLieGroup(abc.ABC):
         after ``...``) raises ``IndexError``, as in NumPy (JAX would clamp it, and Python's
         iteration fallback relies on the error); jax arrays and traced indices clamp, as in
         JAX."""
-        p = jnp.moveaxis(self.parameters(), -1, 0)
         index = index if isinstance(index, tuple) else (index,)
+        index = tuple(bool(i) if isinstance(i, onp.bool_) else i for i in index)  # jnp fails on them
         batch = self.get_batch_axes()
 
         def static(i: Any) -> Optional[onp.ndarray]:
@@ -708,35 +707,40 @@ class MatrixLieGroup(abc.ABC):
                 isinstance(i, int) and not isinstance(i, bool)
             ):
                 a = onp.asarray(i)
-                return a if a.dtype.kind in "iub" else None
+                return a if a.dtype.kind in "iub" and a.ndim > 0 or a.dtype.kind in "iu" else None
             return None
 
         def width(i: Any) -> int:  # batch axes an entry consumes
-            if i is None or i is Ellipsis:
-                return 0
+            if i is None or i is Ellipsis or isinstance(i, (bool, onp.bool_)):
+                return 0  # a scalar bool adds an axis, as None does
             a = static(i) if not isinstance(i, jax.Array) else i
             return a.ndim if a is not None and a.dtype == bool else 1
 
         checked = list(index)
-        if sum(i is Ellipsis for i in checked) == 1:
-            at = checked.index(Ellipsis)
+        at = [k for k, i in enumerate(checked) if i is Ellipsis]  # `is`: ndarray == ... is elementwise
+        if len(at) == 1:
             rest = len(batch) - sum(width(i) for i in checked)
-            checked[at : at + 1] = [slice(None)] * max(rest, 0)
+            checked[at[0] : at[0] + 1] = [slice(None)] * max(rest, 0)
         axis = 0
         for i in checked:  # static entries, from the left; a jax array ends the check
-            if i is None:
+            if width(i) == 0 and not isinstance(i, slice):
                 continue
             a = None if isinstance(i, slice) else static(i)
             if not isinstance(i, slice) and a is None:
                 break
-            if a is not None and a.dtype != bool:
-                if axis >= len(batch) or not onp.all((-batch[axis] <= a) & (a < batch[axis])):
+            n = batch[axis] if axis < len(batch) else 0
+            if a is not None and a.dtype != bool and isinstance(n, (int, onp.integer)):
+                if not onp.all((-n <= a) & (a < n)):  # (symbolic sizes: not checked)
                     raise IndexError(
                         f"{type(self).__name__}: index {i} is out of range for batch axes "
                         f"{batch} (axis {axis})."
                     )
             axis += width(i)
-        return type(self)(jnp.moveaxis(p[(slice(None), *index)], 0, -1))
+        # In the stored layout, the parameter axis last: NumPy's rules put the advanced
+        # indices' axes first when they are not adjacent, which keeps that axis last.
+        if not at:
+            index = (*index, Ellipsis)
+        return type(self)(self.parameters()[(*index, slice(None))])
 
     def __iter__(self) -> Iterator[Self]:
         """Iterate over the first batch axis (``a, b = T`` for a batch of 2); an unbatched
@@ -948,7 +952,6 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         R_a⁻¹t_b and cancels ε·|t_a| (float32 poses 2·10⁴ from the origin, 0.5 apart:
         the residual was off by 1e-3, 10⁴ ulp against mpmath; now ≤ 1.5 ulp). One rotation
         of a point instead of two."""
-        self._check_between(other)
         a, b = materialize(self, other)
         R_inv = a.rotation().inverse()
         return type(self).from_rotation_and_translation(

@@ -284,7 +284,7 @@ class SO3(SOBase):
         """Pitch (rotation about y) of the ZYX convention, in [-π/2, π/2]:
         asin(2(wy − zx)/‖q‖²), direction only (a quaternion 5% long read π/2 for a pitch of
         1.3 when the unit formula was clipped). The sine is clipped to [-1, 1], so rounding
-        at gimbal lock gives ±π/2, never NaN."""
+        at gimbal lock gives ±π/2, never NaN; a zero quaternion (no rotation) gives NaN."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
         n2 = (w * w + x * x) + (y * y + z * z)
         return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x) / n2, -1.0, 1.0))

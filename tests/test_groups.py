@@ -587,10 +587,21 @@ def test_iteration_truthiness_and_static_index_range(G):
     np.testing.assert_array_equal(to_np(T[-3, -2].parameters()), p[0, 0])
     np.testing.assert_array_equal(to_np(T[None, 2].parameters()), p[None, 2])
     for index in ((..., 1), (..., -2), (2, ..., 1), (None, ..., 0, None), [2, 0], np.array([-3, 1]),
-                  ([0, 2], ..., [1, 0]), (p[..., 0] > 0,), (..., np.array([True, False]))):
+                  ([0, 2], ..., [1, 0]), (p[..., 0] > 0,), (..., np.array([True, False])),
+                  (np.array([0, 2]), ...), (np.array([True, False, True]), ...), (..., 1, True),
+                  (True, 0), (np.True_, ..., None)):
         idx = index if isinstance(index, tuple) else (index,)
-        want = np.moveaxis(np.moveaxis(p, -1, 0)[(slice(None), *idx)], 0, -1)  # NumPy's rules
+        if not any(i is Ellipsis for i in idx):
+            idx = (*idx, ...)
+        want = p[(*idx, slice(None))]  # NumPy's rules on the batch axes, parameters last
         np.testing.assert_array_equal(to_np(T[index].parameters()), want)
+    # advanced indices apart (NumPy moves their axes first): the parameter axis stays last
+    U = random_element(G, 4, (2, 5, 3), np.float32)
+    q = to_np(U.parameters())
+    for index in ((0, slice(None), [1, 2]), ([1, 0], slice(None), [2, 2]), (0, ..., [1, 2])):
+        got = U[index]
+        np.testing.assert_array_equal(to_np(got.parameters()), q[(*index, slice(None))])
+        assert got.log().shape == (*got.get_batch_axes(), G.tangent_dim)
 
 
 @pytest.mark.parametrize("G", [SO3, SE3], ids=["SO3", "SE3"])

@@ -440,6 +440,8 @@ def test_export_with_a_symbolic_batch(G, dtype):
             V.log(), (V @ U.inverse()).parameters(), V @ p, V.jlog(), G.jac_right(x),
             T.interpolate(U, 0.3).parameters(), V.normalize().parameters(), V.adjoint(),
             G.from_matrix(V.as_matrix()).parameters(), J[0], J[1],
+            jaxlie_geo.manifold.rminus(T, U), jaxlie_geo.motion.velocity_between(T, U, 2.0),
+            T[[0, 1]].parameters(), T[np.array([2, 0]), ...].parameters(),  # static indices
         )
 
     (b,) = export.symbolic_shape("b")
