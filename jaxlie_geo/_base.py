@@ -702,13 +702,13 @@ class MatrixLieGroup(abc.ABC):
         index = tuple(bool(i) if isinstance(i, onp.bool_) else i for i in index)  # jnp fails on them
         batch = self.get_batch_axes()
 
-        def static(i: Any) -> Optional[onp.ndarray]:
-            if isinstance(i, (list, onp.ndarray, onp.integer)) or (
-                isinstance(i, int) and not isinstance(i, bool)
+        def static(i: Any) -> Optional[onp.ndarray]:  # integers or a mask, known now
+            if isinstance(i, (bool, onp.bool_)) or not isinstance(
+                i, (int, list, onp.ndarray, onp.integer)
             ):
-                a = onp.asarray(i)
-                return a if a.dtype.kind in "iub" and a.ndim > 0 or a.dtype.kind in "iu" else None
-            return None
+                return None
+            a = onp.asarray(i)
+            return a if a.dtype.kind in "iu" or (a.dtype.kind == "b" and a.ndim > 0) else None
 
         def width(i: Any) -> int:  # batch axes an entry consumes
             if i is None or i is Ellipsis or isinstance(i, (bool, onp.bool_)):
