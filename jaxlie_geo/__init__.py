@@ -16,6 +16,7 @@ from ._base import SEBase as SEBase
 from ._base import SOBase as SOBase
 from ._batch import stack as stack
 from ._geodesic import Geodesic as Geodesic
+from ._geodesic import between as between
 from ._geodesic import geodesic as geodesic
 from ._se2 import SE2 as SE2
 from ._se3 import SE3 as SE3

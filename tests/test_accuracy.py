@@ -172,7 +172,8 @@ def test_exp_plain_path(group, dtype):
 @pytest.mark.parametrize("group", ["SE2", "SE3"])
 def test_relative_pose_far_from_the_origin(group, dtype):
     """log(a⁻¹ b) of two poses ~10⁴ from the origin and ~1 apart, as ``manifold.rminus``,
-    ``geodesic(a, b).tangent`` and ``motion.velocity_between(a, b, 1)`` form it, within 4 ulp
+    ``geodesic(a, b).tangent`` and ``motion.velocity_between(a, b, 1)`` form it, and
+    ``between(a, b)``'s parameters, within 4 ulp
     (of max(1, |log|)) of mpmath at 60 digits, and ``interpolate(b, 1)`` returns b to within
     4 ulp of |t_b|. Forming a⁻¹b as a.inverse() @ b cancelled ε·|t_a|: 10⁴ ulp in float32."""
     import jax
@@ -204,9 +205,15 @@ def test_relative_pose_far_from_the_origin(group, dtype):
             "velocity_between": motion.velocity_between(A, B, 1.0),
         }
         end = np.asarray(A.interpolate(B, 1.0).parameters(), np.float64)
+        rel = np.asarray(jaxlie_geo.between(A, B).parameters(), np.float64)
     for name, g in got.items():
         e = M.ulp_errors(np.asarray(g), hi, lo, M.LOG_BLOCKS[group], dtype)
         assert float(e.max()) <= 4.0, f"{group}.{name} {dtype}: {float(e.max()):.1f} ulp"
+    # the relative element itself, against its exact parameters
+    rel_ref = [M.compose_ref(group, a, b, invert_a=True) for a, b in zip(pa, pb)]
+    rhi, rlo = M._dd(rel_ref)
+    e = M.ulp_errors(rel, rhi, rlo, M.EXP_BLOCKS[group], dtype)
+    assert float(e.max()) <= 4.0, f"{group}.between {dtype}: {float(e.max()):.1f} ulp"
     eps = float(np.finfo(dtype).eps)
     err = np.abs(end - pb.astype(np.float64)) / np.linalg.norm(pb.astype(np.float64), axis=-1,
                                                                keepdims=True)

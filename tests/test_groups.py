@@ -1184,3 +1184,22 @@ def test_rpy_depends_on_the_quaternion_direction_only(dtype):
         err[:, 1] = np.abs(np.sin(got[:, 1]) - np.sin(ref[:, 1])) / np.maximum(
             np.cos(ref[:, 1]), 1e-3)
         assert err.max() <= 16 * eps, (scale, err.max() / eps)
+
+
+@over_groups
+def test_between_is_the_relative_element(G):
+    """``between(a, b)`` is ``a⁻¹ @ b`` (the same rotation, translations to rounding near the
+    origin; accuracy far from it: test_accuracy), broadcasts batch axes, and refuses another
+    group or a bare array."""
+    a = random_element(G, 1, (3, 1), np.float64)
+    b = random_element(G, 2, (4,), np.float64)
+    E = jaxlie_geo.between(a, b)
+    assert E.get_batch_axes() == (3, 4)
+    assert_close(E.as_matrix(), (a.inverse() @ b).as_matrix(), np.float64, 8)
+    assert_close((a @ E).as_matrix(), jnp.broadcast_to(b.as_matrix(), (3, 4, G.matrix_dim, G.matrix_dim)),
+                 np.float64, 8)
+    other = SE3 if G is not SE3 else SO3
+    with pytest.raises(TypeError, match=f"expected {G.__name__}, got {other.__name__}"):
+        jaxlie_geo.between(a, other.identity())
+    with pytest.raises(TypeError, match="expected a group element"):
+        jaxlie_geo.between(a.parameters(), b)
