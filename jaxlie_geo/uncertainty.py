@@ -39,11 +39,16 @@ def _check_cov(T: MatrixLieGroup, cov: hints.Array, name: str, where: str) -> ja
     return as_float_array(cov, name, (k, k), where, like=T.parameters())
 
 
-def _check_broadcast(where: str, *items: Any) -> None:
-    """Elements' batch axes and covariances' leading axes broadcast together, else a
-    ``ValueError`` naming ``where`` (not matmul's "Incompatible types")."""
-    shapes = [x.get_batch_axes() if isinstance(x, MatrixLieGroup) else x.shape[:-2] for x in items]
-    check_batches(where, "batch axes of the elements and covariances", *shapes)
+def _check_broadcast(where: str, *items: Any) -> Tuple[int, ...]:
+    """The broadcast of the elements' batch axes and the matrices' leading axes (``None``
+    items skipped), else a ``ValueError`` naming ``where`` (not matmul's "Incompatible
+    types")."""
+    shapes = [
+        x.get_batch_axes() if isinstance(x, MatrixLieGroup) else x.shape[:-2]
+        for x in items
+        if x is not None
+    ]
+    return check_batches(where, "batch axes of the elements and covariances", *shapes)
 
 
 @jit_function()
@@ -59,12 +64,12 @@ def propagate_compose(
     (default: independent)."""
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_compose")
     cov_b = _check_cov(b, cov_b, "cov_b", "propagate_compose")
-    _check_broadcast("propagate_compose", a, b, cov_a, cov_b)
+    if cov_ab is not None:
+        cov_ab = _check_cov(a, cov_ab, "cov_ab", "propagate_compose")
+    _check_broadcast("propagate_compose", a, b, cov_a, cov_b, cov_ab)
     J_a, J_b = jacobians.compose(a, b)
     out = _sandwich(J_a, cov_a) + _sandwich(J_b, cov_b)
     if cov_ab is not None:
-        cov_ab = _check_cov(a, cov_ab, "cov_ab", "propagate_compose")
-        _check_broadcast("propagate_compose", a, b, cov_a, cov_b, cov_ab)
         cross = matmul(matmul(J_a, cov_ab), jnp.swapaxes(J_b, -1, -2))
         out = out + cross + jnp.swapaxes(cross, -1, -2)
     return out
@@ -85,15 +90,15 @@ def propagate_apply(
     """Covariance of the point ``T @ p`` (additive, ``(*batch, space_dim, space_dim)``) from
     the pose's tangent covariance and, optionally, the point's own."""
     cov_T = _check_cov(T, cov_T, "cov_T", "propagate_apply")
-    J_T, J_p = jacobians.apply(T, points)
-    _check_broadcast("propagate_apply", J_T, cov_T)
-    out = _sandwich(J_T, cov_T)
     if cov_points is not None:
         d = T.space_dim
         cov_points = as_float_array(
             cov_points, "cov_points", (d, d), "propagate_apply", like=T.parameters()
         )
-        _check_broadcast("propagate_apply", J_T, cov_T, cov_points)
+    J_T, J_p = jacobians.apply(T, points)
+    _check_broadcast("propagate_apply", J_T, cov_T, cov_points)
+    out = _sandwich(J_T, cov_T)
+    if cov_points is not None:
         out = out + _sandwich(J_p, cov_points)
     return out
 
@@ -121,10 +126,9 @@ def _sample(
     cov = _check_cov(mean, cov, "cov", "sample")
     G = type(mean)
     dtype = jnp.result_type(mean.parameters(), cov)
+    batch = _check_broadcast("sample", mean, cov)
     # XLA has no half-precision Cholesky: factor in float32
     L = jnp.linalg.cholesky(cov.astype(jnp.promote_types(dtype, jnp.float32))).astype(dtype)
-    _check_broadcast("sample", mean, cov)
-    batch = jnp.broadcast_shapes(mean.get_batch_axes(), L.shape[:-2])
     z = jax.random.normal(key, (*batch_axes, *batch, G.tangent_dim), dtype=resolve_dtype(dtype))
     return mean.multiply(G.exp(matmul(L, z[..., None])[..., 0]))
 
