@@ -526,7 +526,9 @@ class MatrixLieGroup(abc.ABC):
     def vee(cls, matrix: hints.Array) -> jax.Array:
         """Inverse of ``hat`` (Eberly's ``InverseL``):
         ``(*batch, matrix_dim, matrix_dim) -> (*batch, tangent_dim)``. Reads the
-        generator coefficients; the symmetric part of the input is ignored."""
+        generator coefficients: the rotation block's antisymmetric part (its symmetric part
+        is ignored) and, for SE(n), the translation column as it stands (the bottom row is
+        ignored)."""
 
     @classmethod
     @abc.abstractmethod
@@ -570,7 +572,7 @@ class MatrixLieGroup(abc.ABC):
 
     @abc.abstractmethod
     def inverse(self) -> Self:
-        """Group inverse."""
+        """Group inverse; same batch axes and dtype."""
 
     def _between(self, other: Self) -> Self:
         """``self⁻¹ @ other``, the relative element of pose graphs, geodesics and
@@ -589,8 +591,8 @@ class MatrixLieGroup(abc.ABC):
 
     @abc.abstractmethod
     def normalize(self) -> Self:
-        """Project the parameters back onto the group: the rotation part divided by its
-        norm (unit quaternion / complex), the translation kept. Any finite nonzero rotation
+        """Project the parameters back onto the group (same batch axes and dtype): the
+        rotation part divided by its norm (unit quaternion / complex), the translation kept. Any finite nonzero rotation
         part works, whatever its scale (``_scalar.unit``); a zero or non-finite one has no
         direction and gives NaN."""
 
@@ -678,6 +680,7 @@ class MatrixLieGroup(abc.ABC):
         def path(a: Self, b: Self, t: Any) -> Self:
             return geodesic(a, b)(t)
 
+        t = jnp.asarray(t)  # lists and tuples too, as in geodesic
         batch = self.get_batch_axes()
         same = type(other) is type(self) and other.get_batch_axes() == batch
         t_shape = jnp.shape(t)
@@ -792,23 +795,26 @@ class MatrixLieGroup(abc.ABC):
     # -- shared helpers -------------------------------------------------------------
 
     @classmethod
-    def _check_tangent(cls, tangent: hints.Array, where: str = "exp", like: Any = None) -> jax.Array:
+    def _check_tangent(
+        cls, tangent: hints.Array, where: str = "exp", like: Any = None, name: str = "tangent"
+    ) -> jax.Array:
         """``tangent`` as a float array ``(*batch, tangent_dim)``; integers promoted to the
-        dtype of ``like`` (the element it acts on), else to the default float."""
-        return as_float_array(
-            tangent, "tangent", (cls.tangent_dim,), f"{cls.__name__}.{where}", like=like
-        )
+        dtype of ``like`` (the element it acts on), else to the default float. Errors name
+        ``where`` (a method name, or a dotted function name such as ``motion.pose_at``)
+        and the argument ``name``."""
+        where = where if "." in where else f"{cls.__name__}.{where}"
+        return as_float_array(tangent, name, (cls.tangent_dim,), where, like=like)
 
     @classmethod
     def _check_matrix(cls, matrix: hints.Array, where: str) -> jax.Array:
         n = cls.matrix_dim
         return as_float_array(matrix, "matrix", (n, n), f"{cls.__name__}.{where}")
 
-    def _check_points(self, target: hints.Array) -> jax.Array:
-        where = f"{type(self).__name__}.apply"
-        points = as_float_array(
-            target, "target", (self.space_dim,), where, like=self.parameters()
-        )
+    def _check_points(
+        self, target: hints.Array, where: Optional[str] = None, name: str = "target"
+    ) -> jax.Array:
+        where = where or f"{type(self).__name__}.apply"
+        points = as_float_array(target, name, (self.space_dim,), where, like=self.parameters())
         check_batches(
             where, "batch axes of the element and the points",
             self.get_batch_axes(), points.shape[:-1],
@@ -899,7 +905,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
 
     @classmethod
     def from_rotation(cls, rotation: ContainedSOType) -> Self:
-        """Pure rotation (zero translation)."""
+        """Pure rotation (zero translation), with the rotation's batch axes."""
         cls._check_rotation(rotation, "from_rotation")
         p = rotation.parameters()
         return cls.from_rotation_and_translation(
@@ -916,7 +922,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         return cls.from_rotation_and_translation(rot, t)
 
     def rotation(self) -> ContainedSOType:
-        """The rotation part."""
+        """The rotation part (SO2 / SO3), same batch axes."""
         k = self._rotation_type.parameters_dim
         return self._rotation_type(self.parameters()[..., :k])
 

@@ -44,7 +44,8 @@ def geodesic(start: GroupT, end: GroupT) -> Geodesic[GroupT]:
 
     Uses the principal log (relative rotation angle ≤ π); at exactly π the log's
     tie-break decides the direction (see ``SO3.log``). Batch axes of the endpoints
-    broadcast.
+    broadcast, to ``B``; the returned ``Geodesic`` maps times ``t`` to elements of batch
+    ``broadcast(B, t.shape)``.
     """
     if type(start) is not type(end):
         raise TypeError(

@@ -59,7 +59,9 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SE2:
-        """R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
+        """``(*batch, 3)`` tangent (vx, vy, θ) -> SE2 of batch ``batch``.
+
+        R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
         B = (1 − cos θ)/θ = θ F1 (seed 001 §8.1; seed 000 §5 derives the same arc),
         all from one half-angle sincos: with c = cos(θ/2), k = sinc(θ/2), s = θk/2 =
         sin(θ/2): A = c k, B = s k, sin θ = 2 s c, cos θ = (c − s)(c + s) (absolute error
@@ -76,11 +78,13 @@ class SE2(SEBase[SO2]):
 
     @override
     def log(self) -> jax.Array:
-        """θ = atan2(s, c); v = V⁻¹ t with V⁻¹ = h I − (θ/2) J, h = (θ/2)cot(θ/2)
+        """Tangent (vx, vy, θ), ``(*batch, 3)``, θ in (−π, π].
+
+        θ = atan2(s, c); v = V⁻¹ t with V⁻¹ = h I − (θ/2) J, h = (θ/2)cot(θ/2)
         = 1 − θ² G(θ²) (the inverse of exp's V; A² + B² = sinc²(θ/2))."""
         p = self.unit_complex_xy
         c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-        theta = jnp.arctan2(s, c)
+        theta = _scalar.principal_angle(s, c)
         x = theta * theta
         h = 1.0 - x * _scalar.G_principal(x)
         half = 0.5 * theta
@@ -105,7 +109,7 @@ class SE2(SEBase[SO2]):
 
     @override
     def adjoint(self) -> jax.Array:
-        """[[R, (ty, −tx)ᵀ], [0, 1]] for the (vx, vy, θ) ordering."""
+        """``(*batch, 3, 3)``: [[R, (ty, −tx)ᵀ], [0, 1]] for the (vx, vy, θ) ordering."""
         p = self.unit_complex_xy
         c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
         z, one = jnp.zeros_like(c), jnp.ones_like(c)
@@ -141,7 +145,7 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
-        """J_r(ξ) = [[A, B, p_x], [−B, A, p_y], [0, 0, 1]], A = sin θ/θ, B = (1 − cos θ)/θ,
+        """``(*batch, 3) -> (*batch, 3, 3)``: J_r(ξ) = [[A, B, p_x], [−B, A, p_y], [0, 0, 1]], A = sin θ/θ, B = (1 − cos θ)/θ,
         p = (θF2 ρx − F1 ρy, F1 ρx + θF2 ρy) (Solà et al. 2018, eq. 163)."""
         xi = cls._check_tangent(tangent, "jac_right")
         th, x, f1, px, py = cls._jac_parts(xi)
@@ -151,7 +155,7 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
-        """J_r⁻¹(ξ) = [[h, −θ/2, θG ρx + ρy/2], [θ/2, h, θG ρy − ρx/2], [0, 0, 1]] with
+        """``(*batch, 3) -> (*batch, 3, 3)``: J_r⁻¹(ξ) = [[h, −θ/2, θG ρx + ρy/2], [θ/2, h, θG ρy − ρx/2], [0, 0, 1]] with
         h = (θ/2)cot(θ/2) = 1 − θ² G(θ²): ``jac_right`` inverted in closed form. Its
         translation column −M⁻¹p (p from Solà et al. 2018, eq. 163) simplifies, with
         1 − cos θ = 2 sin²(θ/2), to (θG I − ½ J) ρ, J the 90° rotation: one kernel (G)
@@ -175,7 +179,8 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def ad(cls, tangent: hints.Array) -> jax.Array:
-        """[[0, −θ, vy], [θ, 0, −vx], [0, 0, 0]] for the (vx, vy, θ) ordering."""
+        """``(*batch, 3) -> (*batch, 3, 3)``: [[0, −θ, vy], [θ, 0, −vx], [0, 0, 0]] for the
+        (vx, vy, θ) ordering."""
         xi = cls._check_tangent(tangent, "ad")
         vx, vy, th = xi[..., 0], xi[..., 1], xi[..., 2]
         return cls._mat3(None, th, vy, -vx, 0.0)

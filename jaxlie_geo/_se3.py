@@ -112,7 +112,9 @@ class SE3(SEBase[SO3]):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SE3:
-        """q = exp_SO3(ω); t = V v = v + F1 (ω × v) + F2 (ω × (ω × v)), θ = ‖ω‖
+        """``(*batch, 6)`` tangent (v, ω) -> SE3 of batch ``batch``.
+
+        q = exp_SO3(ω); t = V v = v + F1 (ω × v) + F2 (ω × (ω × v)), θ = ‖ω‖
         (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices). On CPU a
         batch of at least 2^19 runs in 2^16-element chunks (``_batch.in_chunks``: 10^6
         elements, float32, 39 → 29 ns/element). Rotation angles as in ``SO3.exp``: any θ
@@ -136,7 +138,9 @@ class SE3(SEBase[SO3]):
 
     @override
     def log(self) -> jax.Array:
-        """ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
+        """Tangent (v, ω), ``(*batch, 6)``, with ‖ω‖ in [0, π].
+
+        ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
         G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
         p = materialize(self.wxyz_xyz)
         u, s, h = log_quaternion_parts(p[..., :4])
@@ -159,7 +163,7 @@ class SE3(SEBase[SO3]):
 
     @override
     def adjoint(self) -> jax.Array:
-        """[[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41, permuted)."""
+        """``(*batch, 6, 6)``: [[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41, permuted)."""
         R = self.rotation().as_matrix()
         tR = matmul(skew(self.translation()), R)
         zero = jnp.zeros_like(R)
@@ -201,14 +205,14 @@ class SE3(SEBase[SO3]):
     @classmethod
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
-        """J_r(ξ) = J_l(−ξ) = [[J_r(φ), Q(−ρ, −φ)], [0, J_r(φ)]] for ξ = (ρ, φ)."""
+        """``(*batch, 6) -> (*batch, 6, 6)``: J_r(ξ) = J_l(−ξ) = [[J_r(φ), Q(−ρ, −φ)], [0, J_r(φ)]] for ξ = (ρ, φ)."""
         xi = cls._check_tangent(tangent, "jac_right")
         return cls._blocks(jac_right_so3(xi[..., 3:]), cls._q_block(xi))
 
     @classmethod
     @override
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
-        """J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]], J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ)
+        """``(*batch, 6) -> (*batch, 6, 6)``: J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]], J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ)
         (block inverse of ``jac_right``, in closed form)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
         # In memory before the products, which read every entry three times over.
@@ -218,6 +222,7 @@ class SE3(SEBase[SO3]):
     @classmethod
     @override
     def ad(cls, tangent: hints.Array) -> jax.Array:
-        """[[φ̂, ρ̂], [0, φ̂]] for ξ = (ρ, φ) (translation first)."""
+        """``(*batch, 6) -> (*batch, 6, 6)``: [[φ̂, ρ̂], [0, φ̂]] for ξ = (ρ, φ) (translation
+        first)."""
         xi = cls._check_tangent(tangent, "ad")
         return cls._blocks(skew(xi[..., 3:]), skew(xi[..., :3]))

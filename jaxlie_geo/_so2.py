@@ -42,7 +42,7 @@ class SO2(SOBase):
     def as_radians(self) -> jax.Array:
         """Angle in (-π, π], shape ``batch``."""
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
-        return jnp.arctan2(s, c)
+        return _scalar.principal_angle(s, c)
 
     @classmethod
     @override

@@ -250,7 +250,8 @@ class SO3(SOBase):
     @staticmethod
     def from_rpy_radians(roll: hints.Scalar, pitch: hints.Scalar, yaw: hints.Scalar) -> SO3:
         """From ZYX Euler angles (mobile-robot convention):
-        ``Rz(yaw) @ Ry(pitch) @ Rx(roll)``, roll applied first."""
+        ``Rz(yaw) @ Ry(pitch) @ Rx(roll)``, roll applied first. The three angles are
+        scalars or arrays that broadcast to the batch shape."""
         return (
             SO3.from_z_radians(yaw) @ SO3.from_y_radians(pitch) @ SO3.from_x_radians(roll)
         )
@@ -274,14 +275,14 @@ class SO3(SOBase):
         )
 
     def compute_roll_radians(self) -> jax.Array:
-        """Roll (rotation about x) of the ZYX convention, in (-π, π]. Like ``as_matrix``, it
+        """Roll (rotation about x) of the ZYX convention, shape ``batch``, in (-π, π]. Like ``as_matrix``, it
         depends on the quaternion's direction only: atan2(2(wx + yz), w² + z² − x² − y²),
         where jaxlie's 1 − 2(x² + y²) assumes a unit quaternion."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arctan2(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))
+        return _scalar.principal_angle(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))
 
     def compute_pitch_radians(self) -> jax.Array:
-        """Pitch (rotation about y) of the ZYX convention, in [-π/2, π/2]:
+        """Pitch (rotation about y) of the ZYX convention, shape ``batch``, in [-π/2, π/2]:
         asin(2(wy − zx)/‖q‖²), direction only (a quaternion 5% long read π/2 for a pitch of
         1.3 when the unit formula was clipped). The sine is clipped to [-1, 1], so rounding
         at gimbal lock gives ±π/2, never NaN; a zero quaternion (no rotation) gives NaN."""
@@ -290,10 +291,10 @@ class SO3(SOBase):
         return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x) / n2, -1.0, 1.0))
 
     def compute_yaw_radians(self) -> jax.Array:
-        """Yaw (rotation about z) of the ZYX convention, in (-π, π]; direction only:
+        """Yaw (rotation about z) of the ZYX convention, shape ``batch``, in (-π, π]; direction only:
         atan2(2(wz + xy), w² + x² − y² − z²)."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arctan2(2.0 * (w * z + x * y), (w * w + x * x) - (y * y + z * z))
+        return _scalar.principal_angle(2.0 * (w * z + x * y), (w * w + x * x) - (y * y + z * z))
 
     @classmethod
     @override
@@ -304,7 +305,9 @@ class SO3(SOBase):
     @classmethod
     @override
     def from_matrix(cls, matrix: hints.Array) -> SO3:
-        """Quaternion from a rotation matrix by Shepperd's pivoting: of the four
+        """``(*batch, 3, 3)`` rotation matrix -> SO3 of batch ``batch``.
+
+        Quaternion by Shepperd's pivoting: of the four
         expressions 4w², 4x², 4y², 4z² (from the trace and the diagonal), the largest is
         square-rooted, the other three components come from off-diagonal sums or
         differences divided by it. Accurate at every angle, π included; one sqrt.
@@ -368,7 +371,9 @@ class SO3(SOBase):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SO3:
-        """q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖ (seed 002's Rodrigues form, in
+        """``(*batch, 3)`` tangent ω -> SO3 of batch ``batch``.
+
+        q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖ (seed 002's Rodrigues form, in
         quaternions), both coefficients from ``_scalar.half_angle`` (closed forms with an
         exact custom JVP; θ² compensated when the batch holds an angle beyond √10, see
         ``by_angle``). Any angle whose square is finite (θ < 1.8e19 in float32, 1.3e154 in

@@ -32,13 +32,22 @@ def _map(f_group: Callable, f_array: Callable, tree: Any, *rest: Any) -> Any:
 
 
 def rplus(transform: Any, delta: TangentPytree) -> Any:
-    """Right plus, ``T ⊕ δ = T @ exp(δ)`` for each group leaf, ``x + δ`` for arrays."""
-    return _map(lambda T, d: T.multiply(type(T).exp(d)), jnp.add, transform, delta)
+    """Right plus, ``T ⊕ δ = T @ exp(δ)`` for each group leaf, ``x + δ`` for arrays.
+
+    ``delta`` has ``transform``'s tree structure, with a ``(*batch, tangent_dim)`` array
+    in place of each element (batch axes broadcast); integer increments take the
+    element's dtype."""
+    def plus(T: Any, d: Any) -> Any:
+        d = T._check_tangent(d, "manifold.rplus", like=T.parameters(), name="delta")
+        return T.multiply(type(T).exp(d))
+
+    return _map(plus, jnp.add, transform, delta)
 
 
 def rminus(a: Any, b: Any) -> TangentPytree:
-    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays: the
-    result δ satisfies ``rplus(a, δ) = b`` for every leaf. (jaxlie 1.5 takes the same
+    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays: a
+    pytree of ``a``'s structure with a ``(*batch, tangent_dim)`` array per element; δ
+    satisfies ``rplus(a, δ) = b`` for every leaf. (jaxlie 1.5 takes the same
     argument order for groups but returns ``a − b`` for array leaves.)"""
     return _map(lambda A, B: A._between(B).log(), lambda x, y: y - x, a, b)
 
@@ -53,7 +62,8 @@ def zero_tangents(pytree: Any) -> TangentPytree:
 
 
 def normalize_all(pytree: Any) -> Any:
-    """``normalize()`` every group element of a pytree; arrays pass through."""
+    """``normalize()`` every group element of a pytree (same structure, batch axes and
+    dtypes); arrays pass through."""
     return _map(lambda T: T.normalize(), lambda x: x, pytree)
 
 
@@ -67,7 +77,8 @@ def value_and_grad(
 ) -> Callable:
     """Like ``jax.value_and_grad`` (same parameters, in jaxlie's positional order), but
     gradients of group arguments are taken with respect to a right perturbation δ in the
-    tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0."""
+    tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0: an element of batch ``batch`` gets a
+    ``(*batch, tangent_dim)`` array in the gradient pytree."""
 
     def wrapped(*args: Any, **fkwargs: Any) -> Any:
         def tangent_fun(*deltas: Any, **kdeltas: Any) -> Any:
@@ -97,8 +108,8 @@ def grad(
     allow_int: bool = False,
     reduce_axes: Sequence[Any] = (),
 ) -> Callable:
-    """Like ``jax.grad``, with tangent-space gradients for group arguments
-    (see ``value_and_grad``)."""
+    """Like ``jax.grad``, with tangent-space gradients for group arguments: a
+    ``(*batch, tangent_dim)`` array per element (see ``value_and_grad``)."""
     vg = value_and_grad(fun, argnums, has_aux, holomorphic, allow_int, reduce_axes)
 
     def wrapped(*args: Any, **fkwargs: Any) -> Any:

@@ -69,7 +69,7 @@ def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
             ``interpolate`` (a batch of times on one body: ``t`` of shape (K,)).
     """
     G = type(start)
-    velocity = G._check_tangent(velocity, "pose_at", like=start.parameters())
+    velocity = G._check_tangent(velocity, "motion.pose_at", like=start.parameters(), name="velocity")
     return Geodesic(start, velocity)(t)
 
 
@@ -98,8 +98,10 @@ class Arc:
 
     @property
     def radius(self) -> jax.Array:
-        """|v|/|ω| (inf on a straight line)."""
-        return self.speed / jnp.abs(self.angular_velocity)
+        """|v|/|ω|, shape ``batch``: inf on a straight line and, as 1/|curvature|, when
+        standing still; 0 when turning on the spot."""
+        still = (self.speed == 0) & (self.angular_velocity == 0)
+        return jnp.where(still, jnp.inf, self.speed / jnp.abs(self.angular_velocity))
 
 
 @jit_function()
@@ -111,10 +113,17 @@ def arc(start: SE2, velocity: hints.Array) -> Arc:
     Geometry: the world-frame velocity is u = R₀ v; the body turns about the centre
     c = p₀ + J u/ω (J = 90° rotation), with radius |v|/|ω|; after time t it has turned by
     ωt, and its position is c + R(ωt)(p₀ − c) — the same pose as ``pose_at``.
+
+    Args:
+        start: SE2, batch ``B``.
+        velocity: ``(*B', 3)``, body frame (vx, vy, ω).
+
+    Returns:
+        An ``Arc`` whose fields have the batch shape ``broadcast(B, B')``.
     """
     if not isinstance(start, SE2):
         raise TypeError(f"arc: `start` must be SE2, got {type(start).__name__}.")
-    xi = SE2._check_tangent(velocity, "arc", like=start.parameters())
+    xi = SE2._check_tangent(velocity, "motion.arc", like=start.parameters(), name="velocity")
     check_batches("arc", "batch axes of `start` and `velocity`", start.get_batch_axes(), xi.shape[:-1])
     v, omega = xi[..., :2], xi[..., 2]
     u = start.rotation().apply(v)

@@ -61,7 +61,8 @@ def propagate_compose(
 ) -> jax.Array:
     """Covariance of ``a @ b``: ``J_a Σ_a J_aᵀ + J_b Σ_b J_bᵀ + J_a Σ_ab J_bᵀ + (…)ᵀ`` with
     ``J_a = Ad(b⁻¹)``, ``J_b = I``. ``cov_ab`` = E[δ_a δ_bᵀ] for correlated operands
-    (default: independent)."""
+    (default: independent). Σ_a, Σ_b, Σ_ab: ``(*batch, k, k)``, batch axes broadcasting
+    with the elements'; returns ``(*batch, k, k)``."""
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_compose")
     cov_b = _check_cov(b, cov_b, "cov_b", "propagate_compose")
     if cov_ab is not None:
@@ -77,7 +78,8 @@ def propagate_compose(
 
 @jit_function()
 def propagate_inverse(a: GroupT, cov_a: hints.Array) -> jax.Array:
-    """Covariance of ``a⁻¹``: ``Ad(a) Σ Ad(a)ᵀ``."""
+    """Covariance of ``a⁻¹``: ``Ad(a) Σ Ad(a)ᵀ``; Σ ``(*batch, k, k)`` (broadcasting with
+    ``a``'s batch) -> ``(*batch, k, k)``."""
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_inverse")
     _check_broadcast("propagate_inverse", a, cov_a)
     return _sandwich(jacobians.inverse(a), cov_a)
@@ -95,7 +97,7 @@ def propagate_apply(
         cov_points = as_float_array(
             cov_points, "cov_points", (d, d), "propagate_apply", like=T.parameters()
         )
-    J_T, J_p = jacobians.apply(T, points)
+    J_T, J_p = jacobians._apply(T, points, "propagate_apply")
     _check_broadcast("propagate_apply", J_T, cov_T, cov_points)
     out = _sandwich(J_T, cov_T)
     if cov_points is not None:
@@ -112,7 +114,8 @@ def sample(
     """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky). Σ must be
     symmetric positive definite: otherwise the factor, and so the samples, are NaN.
 
-    Returns a batch of shape ``(*batch_axes, *mean.get_batch_axes())``."""
+    ``cov``: ``(*batch', k, k)``. Returns a batch of shape ``(*batch_axes, *batch)``, with
+    ``batch`` the broadcast of ``mean.get_batch_axes()`` and ``batch'``."""
     return _sample(key, mean, cov, tuple(batch_axes))
 
 

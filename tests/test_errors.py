@@ -327,9 +327,29 @@ def test_integer_inputs_take_the_elements_dtype():
             motion.pose_at(T, np.ones(6, np.int32), 2.0).parameters(),
             motion.arc(S, np.ones(3, np.int32)).centre,
             *jacobians.rplus(T, np.ones(6, np.int32)),
+            jaxlie_geo.manifold.rplus(T, np.ones(6, np.int32)).parameters(),  # was float64
         ]
         assert [o.dtype for o in outs] == [jnp.float32] * len(outs)
 
+
+
+@pytest.mark.parametrize(("call", "bad", "named"), [
+    (lambda x: jaxlie_geo.jacobians.rplus(SO3.identity(), x), (4,), "jacobians.rplus: `delta`"),
+    (lambda x: jaxlie_geo.jacobians.apply(SE3.identity(), x), (4,), "jacobians.apply: `points`"),
+    (lambda x: jaxlie_geo.uncertainty.propagate_apply(SE3.identity(), np.eye(6), x), (2,),
+     "propagate_apply: `points`"),
+    (lambda x: jaxlie_geo.motion.pose_at(SE3.identity(), x, 1.0), (3,),
+     "motion.pose_at: `velocity`"),
+    (lambda x: jaxlie_geo.motion.arc(SE2.identity(), x), (2,), "motion.arc: `velocity`"),
+    (lambda x: jaxlie_geo.manifold.rplus(SE2.identity(), x), (6,), "manifold.rplus: `delta`"),
+], ids=["jacobians.rplus", "jacobians.apply", "propagate_apply", "pose_at", "arc", "manifold.rplus"])
+def test_module_functions_name_themselves_and_the_argument(call, bad, named):
+    """Errors from module functions name that function and its argument (they named the
+    method underneath, e.g. "SO3.rplus: `tangent`" or "SE3.apply: `target`")."""
+    with pytest.raises(ValueError) as info:
+        call(np.zeros(bad))
+    assert str(info.value).startswith(named), str(info.value)
+    assert str(tuple(bad)) in str(info.value)
 
 
 def test_odd_parameter_dtypes_and_reshape_sizes():

@@ -514,6 +514,8 @@ def test_interpolate_time_broadcasting(G, dtype, seed):
     # unbatched endpoints, t of shape (K,) -> K poses
     path = T.interpolate(U, ts)
     assert path.get_batch_axes() == (5,) and path.parameters().dtype == dtype
+    # a list of times works as the array does (it raised TracerArrayConversionError)
+    assert_close(T.interpolate(U, ts.tolist()).as_matrix(), path.as_matrix(), dtype, 2)
     for k in range(5):
         assert_close(path[k].as_matrix(), T.interpolate(U, float(ts[k])).as_matrix(), dtype, 2)
     # extrapolation t = 2: T exp(2 log(T⁻¹U)) = T exp(2x)
@@ -951,6 +953,25 @@ def test_integer_inputs_keep_float32_of_the_element(G):
         R = T.rotation()
         E = G.from_rotation_and_translation(R, np.ones((3, G.space_dim), np.int32))
         assert E.parameters().dtype == jnp.float32, E.parameters().dtype
+
+
+def test_angles_at_pi_are_plus_pi():
+    """Angles are in (−π, π]: a rotation by π whose stored sine is −0.0 (``from_matrix(−I)``
+    stores one) reads +π, where atan2 gives −π. SO2 ``as_radians``/``log``, SE2 ``log``, SO3
+    roll and yaw; the derivative there is still atan2's."""
+    for dtype in (jnp.float16, jnp.bfloat16, jnp.float32, jnp.float64):
+        R = SO2.from_matrix(-np.eye(2, dtype=dtype))
+        assert np.signbit(np.float32(R.unit_complex[1]))  # the case: sine −0.0
+        want = jnp.asarray(np.pi, dtype)
+        for got in (R.as_radians(), R.log()[0], SE2.from_rotation(R).log()[2]):
+            assert got.dtype == dtype and got == want, (dtype, got)
+    # roll π: 2(wx + yz) = −0.0; yaw π: 2(wz + xy) = −0.0
+    assert SO3(jnp.array([-0.0, 1.0, 0.0, -0.0])).compute_roll_radians() == np.pi
+    assert SO3(jnp.array([-0.0, -0.0, 0.0, 1.0])).compute_yaw_radians() == np.pi
+    d = jax.grad(lambda s: SO2(jnp.stack([jnp.array(-1.0), s])).as_radians())(jnp.array(-0.0))
+    assert d == jax.grad(lambda s: jnp.arctan2(s, -1.0))(-0.0) == -1.0
+    # just below the cut the angle stays near −π (only −π itself moves)
+    assert SO2(jnp.array([-1.0, -1e-9])).as_radians() == pytest.approx(-np.pi + 1e-9, abs=1e-15)
 
 
 def test_integer_factories():

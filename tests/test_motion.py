@@ -468,9 +468,11 @@ def test_arc_straight_line_and_turning_on_the_spot():
         np.testing.assert_array_equal(np.asarray(arc.centre), [1.0, -2.0])
         g = motion.pose_at(start, jnp.asarray(xi), 5.0)
         np.testing.assert_allclose(np.asarray(g.translation()), [1.0, -2.0], atol=1e-15)
-    # Standing still: curvature 0, centre = start, heading 0.
+    # Standing still: curvature 0, radius inf (1/|curvature|; it was 0/0 = NaN), centre =
+    # start, heading 0.
     arc = motion.arc(start, jnp.zeros(3))
     assert float(arc.curvature) == 0.0 and float(arc.heading) == 0.0
+    assert float(arc.radius) == np.inf
     np.testing.assert_array_equal(np.asarray(arc.centre), [1.0, -2.0])
     # Gradients at zero speed are 0 (the subgradient), not NaN from √0 and atan2(0, 0).
     for v in (jnp.zeros(3), jnp.array([0.0, 0.0, 0.7])):
@@ -485,6 +487,7 @@ def test_arc_straight_line_and_turning_on_the_spot():
     assert arcs.centre.shape == (4, 2)
     assert np.all(np.isfinite(np.asarray(arcs.centre)))
     np.testing.assert_allclose(np.asarray(arcs.curvature), [0.0, np.inf, 1 / np.sqrt(2), 0.0])
+    np.testing.assert_allclose(np.asarray(arcs.radius), [np.inf, 0.0, np.sqrt(2), np.inf])
 
 
 def test_arc_rejects_other_groups():

@@ -123,6 +123,9 @@ def test_sample_batched_means_and_float32():
     draws = uncertainty.sample(jax.random.key(4), means, np.eye(6, dtype=np.float32) * 1e-4, (5,))
     assert draws.get_batch_axes() == (5, 4)
     assert draws.parameters().dtype == jnp.float32
+    # a batched covariance broadcasts with the mean's batch, as documented
+    covs = np.broadcast_to(np.eye(6, dtype=np.float32) * 1e-4, (3, 1, 6, 6))
+    assert uncertainty.sample(jax.random.key(4), means, covs, (5,)).get_batch_axes() == (5, 3, 4)
 
 
 @over_groups
