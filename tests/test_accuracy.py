@@ -218,3 +218,30 @@ def test_relative_pose_far_from_the_origin(group, dtype):
     err = np.abs(end - pb.astype(np.float64)) / np.linalg.norm(pb.astype(np.float64), axis=-1,
                                                                keepdims=True)
     assert float(err.max()) <= 4 * eps, float(err.max()) / eps
+
+
+@pytest.mark.parametrize("dtype", M.DTYPES)
+def test_se3_exp_near_full_turns_with_v_perpendicular(dtype):
+    """θ within 1e-3 of 2πk (k = 1..4) with v ⟂ ω, ‖v‖ ∈ {1, 10³}: there the translation
+    F0 v + F1 ω×v + F2 (ω·v) ω is ~1e-4 ‖v‖ long and ω·v cancels, so it must be summed
+    compensated (``_scalar.dot_compensated``; a plain dot is off by ~ε‖v‖θ). The grid's
+    beyond-π draws near 2πk have v in a random direction, where ω·v does not cancel."""
+    import jax.numpy as jnp
+    from mpmath import mp
+
+    rng = np.random.default_rng(12)
+    xs = []
+    for size in (1.0, 1e3):
+        for k in rng.integers(1, 5, 32):
+            w = M._unit(rng, 3) * (2 * np.pi * k + rng.uniform(-1e-3, 1e-3))
+            v = np.cross(w, M._unit(rng, 3))
+            xs.append(np.concatenate([size * v / np.linalg.norm(v), w]))
+    x = M.flush(np.array(xs).astype(dtype))
+    x[:, :3] -= np.sum(x[:, :3] * x[:, 3:], -1, keepdims=True) * x[:, 3:] / np.sum(
+        x[:, 3:] ** 2, -1, keepdims=True)  # ⟂ again after rounding, to the dtype's precision
+    with mp.workdps(M.DPS):
+        hi, lo = M._dd([M.exp_ref("SE3", xi) for xi in x])
+    with M.x64_for(dtype):
+        got = np.asarray(jaxlie_geo.SE3.exp(jnp.asarray(x)).parameters())
+    e = M.ulp_errors(got, hi, lo, M.EXP_BLOCKS["SE3"], dtype)
+    assert e.max() <= M.BOUNDS["exp"], (e.max(), x[np.argmax(e)])

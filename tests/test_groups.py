@@ -1160,6 +1160,16 @@ def test_exp_path_choice_is_invisible(G, dtype):
     # The big element takes the compensated path either way (its accuracy beyond π is
     # tests/test_accuracy.py's "beyond_pi" regime, whose batches hold only such angles).
     np.testing.assert_array_equal(mixed[-1:], to_np(G.exp(big).parameters()))
+    # Just past the threshold (θ² in (10, 40)) a whole batch takes the compensated kernel:
+    # its quaternions agree with the per-element path (vmap: always compensated) to 0.5 eps;
+    # the plain kernel there (the threshold 4x too high) differs by 1.5 eps.
+    edge = random_tangent(G, 7, (512,), dtype)
+    rot = edge[..., -3:]
+    theta = np.sqrt(np.random.default_rng(7).uniform(10.0, 40.0, (512, 1)))
+    edge[..., -3:] = (rot / np.linalg.norm(rot, axis=-1, keepdims=True) * theta).astype(dtype)
+    batch = to_np(G.exp(edge).parameters()[..., :4])
+    each = to_np(jax.vmap(lambda x: G.exp(x).parameters()[..., :4])(edge))
+    assert np.max(np.abs(batch - each)) <= 0.5 * eps
 
 
 @pytest.mark.parametrize("G", [SO3, SE3], ids=["SO3", "SE3"])

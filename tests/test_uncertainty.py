@@ -155,6 +155,13 @@ def test_mean_weights_batches_and_errors():
     np.testing.assert_allclose(
         to_np(mid.as_matrix()), to_np(a.interpolate(b, 0.5).as_matrix()), atol=1e-12
     )
+    # Two points, weights (w_a, w_b): the fixed point is a ⊕ β log(a⁻¹ b), β = w_b/(w_a + w_b)
+    # (on the one-parameter subgroup: Σ wᵢ log(μ⁻¹ xᵢ) = (β − s) log(a⁻¹ b) at μ = a ⊕ s ·).
+    # Negative weights, documented as the affine combination, extrapolate.
+    for w_a, w_b in ((3.0, 1.0), (-1.0, 2.0), (-2.0, 1.0), (2.0, -1.0)):
+        got = uncertainty.mean(xs, weights=np.array([w_a, w_b]))
+        want = a.interpolate(b, w_b / (w_a + w_b))
+        np.testing.assert_allclose(to_np(got.as_matrix()), to_np(want.as_matrix()), atol=1e-12)
     with pytest.raises(ValueError, match="at least one batch axis"):
         uncertainty.mean(SO3.identity())
     with pytest.raises(ValueError, match=r"weights.*\(2,\)"):
