@@ -473,14 +473,6 @@ def atan2_over(n2: jax.Array, w: jax.Array) -> jax.Array:
     return 4.0 * _horner("atan", n2 * inv * inv, _ATAN_X_MAX) * inv
 
 
-def principal_angle(s: jax.Array, c: jax.Array) -> jax.Array:
-    """atan2(s, c) in (−π, π]. atan2 gives −π for s = −0.0 and c < 0, which a rotation by
-    π can store (``SO2.from_matrix(-I)`` does); there −π becomes π, as −π + 2π, which is
-    exact in binary floating point and leaves the derivative alone."""
-    theta = jnp.arctan2(s, c)
-    return jnp.where(theta == -math.pi, theta + 2.0 * math.pi, theta)
-
-
 def unit(v: jax.Array) -> jax.Array:
     """``v / ‖v‖`` along the last axis, for any finite nonzero ``v`` of normal floats.
 

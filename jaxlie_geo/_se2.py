@@ -78,13 +78,13 @@ class SE2(SEBase[SO2]):
 
     @override
     def log(self) -> jax.Array:
-        """Tangent (vx, vy, θ), ``(*batch, 3)``, θ in (−π, π].
+        """Tangent (vx, vy, θ), ``(*batch, 3)``, θ = ``rotation().as_radians()`` in [−π, π].
 
         θ = atan2(s, c); v = V⁻¹ t with V⁻¹ = h I − (θ/2) J, h = (θ/2)cot(θ/2)
         = 1 − θ² G(θ²) (the inverse of exp's V; A² + B² = sinc²(θ/2))."""
         p = self.unit_complex_xy
         c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-        theta = _scalar.principal_angle(s, c)
+        theta = jnp.arctan2(s, c)
         x = theta * theta
         h = 1.0 - x * _scalar.G_principal(x)
         half = 0.5 * theta

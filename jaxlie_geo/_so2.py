@@ -40,9 +40,12 @@ class SO2(SOBase):
         return SO2(jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1))
 
     def as_radians(self) -> jax.Array:
-        """Angle in (-π, π], shape ``batch``."""
+        """Angle atan2(sin, cos), shape ``batch``, in [-π, π]: -π only for a rotation by π
+        whose stored sine is -0.0 (``from_matrix(-I)`` stores one), as in jaxlie and NumPy.
+        Mapping that -π to π cost SO2 ``log`` 40% at 10³ elements on one core (16 → 23
+        ns/element) and more where XLA then splits the kernel over threads."""
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
-        return _scalar.principal_angle(s, c)
+        return jnp.arctan2(s, c)
 
     @classmethod
     @override

@@ -275,11 +275,12 @@ class SO3(SOBase):
         )
 
     def compute_roll_radians(self) -> jax.Array:
-        """Roll (rotation about x) of the ZYX convention, shape ``batch``, in (-π, π]. Like ``as_matrix``, it
+        """Roll (rotation about x) of the ZYX convention, shape ``batch``, in [-π, π] (-π
+        only where atan2's sine argument is -0.0, as for ``SO2.as_radians``). Like ``as_matrix``, it
         depends on the quaternion's direction only: atan2(2(wx + yz), w² + z² − x² − y²),
         where jaxlie's 1 − 2(x² + y²) assumes a unit quaternion."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return _scalar.principal_angle(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))
+        return jnp.arctan2(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))
 
     def compute_pitch_radians(self) -> jax.Array:
         """Pitch (rotation about y) of the ZYX convention, shape ``batch``, in [-π/2, π/2]:
@@ -291,10 +292,11 @@ class SO3(SOBase):
         return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x) / n2, -1.0, 1.0))
 
     def compute_yaw_radians(self) -> jax.Array:
-        """Yaw (rotation about z) of the ZYX convention, shape ``batch``, in (-π, π]; direction only:
+        """Yaw (rotation about z) of the ZYX convention, shape ``batch``, in [-π, π] (as
+        roll); direction only:
         atan2(2(wz + xy), w² + x² − y² − z²)."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return _scalar.principal_angle(2.0 * (w * z + x * y), (w * w + x * x) - (y * y + z * z))
+        return jnp.arctan2(2.0 * (w * z + x * y), (w * w + x * x) - (y * y + z * z))
 
     @classmethod
     @override
