@@ -555,6 +555,9 @@ def test_indexing_reshape_stack(G, dtype, seed):
     np.testing.assert_array_equal(to_np(R.parameters()), p.reshape(8, -1))
     assert T.reshape(4, 2).get_batch_axes() == (4, 2)
     np.testing.assert_array_equal(to_np(T.reshape(4, 2).parameters()), p.reshape(4, 2, -1))
+    for shape in ((-1,), (2, -1), (-1, 1, 2)):  # -1 as in NumPy, the parameter axis kept
+        np.testing.assert_array_equal(to_np(T.reshape(*shape).parameters()),
+                                      p.reshape(*shape, G.parameters_dim))
     S0 = jaxlie_geo.stack([T[0], T[1]], axis=0)
     np.testing.assert_array_equal(to_np(S0.parameters()), p)
     S1 = jaxlie_geo.stack([T[0], T[1]], axis=1)
@@ -968,6 +971,28 @@ def test_angle_of_a_half_turn():
                                    -np.eye(2), atol=2 * float(jnp.finfo(dtype).eps))
 
 
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=["float32", "float64"])
+def test_log_at_exactly_pi_takes_the_stored_axis(dtype):
+    """At w = 0 exactly (a turn of π) the principal log is +π times the stored vector
+    part's direction, as documented (−π·axis is the other valid log), in SO3 and SE3;
+    interpolate and velocity_between follow it."""
+    rng = np.random.default_rng(14)
+    axes = np.concatenate([np.eye(3), -np.eye(3), rng.normal(size=(4, 3))])
+    axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
+    q = jnp.asarray(np.concatenate([np.zeros((10, 1)), axes], axis=-1), dtype)
+    eps = float(jnp.finfo(dtype).eps)
+    want = np.pi * axes
+    np.testing.assert_allclose(to_np(SO3(q).log()), want, atol=8 * eps)
+    t = jnp.asarray(rng.normal(size=(10, 3)), dtype)
+    T = SE3.from_rotation_and_translation(SO3(q), t)
+    np.testing.assert_allclose(to_np(T.log()[..., 3:]), want, atol=8 * eps)
+    half = SO3.identity((10,), dtype).interpolate(SO3(q), 0.5)
+    np.testing.assert_allclose(to_np(half.as_matrix()), to_np(SO3.exp(want / 2).as_matrix()),
+                               atol=8 * eps)
+    w = jaxlie_geo.motion.velocity_between(SO3.identity((10,), dtype), SO3(q), 2.0)
+    np.testing.assert_allclose(to_np(w), want / 2, atol=8 * eps)
+
+
 def test_integer_factories():
     assert jnp.issubdtype(SO2.from_radians(1).parameters().dtype, jnp.floating)
     assert_close(SO2.from_radians(1).as_radians(), 1.0, jnp.float64)
@@ -1228,3 +1253,24 @@ def test_between_is_the_relative_element(G):
         jaxlie_geo.between(a, other.identity())
     with pytest.raises(TypeError, match="expected a group element"):
         jaxlie_geo.between(a.parameters(), b)
+
+
+def test_sample_uniform_is_haar():
+    """sample_uniform draws from the Haar measure, checked by Kolmogorov–Smirnov tests
+    (20 000 draws, fixed key): the rotation angle has CDF θ/(2π) on [0, 2π) for SO(2) and
+    (θ − sin θ)/π on [0, π] for SO(3); and a Haar rotation maps a fixed vector to a uniform
+    point of the sphere, whose z has CDF (1 + z)/2. SE translations are uniform in [-1, 1]."""
+    import scipy.stats
+
+    key = jax.random.PRNGKey(3)
+    n = 20000
+    th = np.mod(to_np(SO2.sample_uniform(key, (n,)).as_radians()), 2 * np.pi)
+    assert scipy.stats.kstest(th, lambda x: x / (2 * np.pi)).pvalue > 1e-3
+    R = SO3.sample_uniform(key, (n,))
+    angle = np.linalg.norm(to_np(R.log()), axis=-1)
+    assert scipy.stats.kstest(angle, lambda x: (x - np.sin(x)) / np.pi).pvalue > 1e-3
+    z = to_np(R.apply(jnp.array([1.0, 0.0, 0.0])))[:, 2]
+    assert scipy.stats.kstest(z, lambda x: (1 + x) / 2).pvalue > 1e-3
+    for G in (SE2, SE3):
+        t = to_np(G.sample_uniform(key, (n,)).translation()).ravel()
+        assert scipy.stats.kstest(t, lambda x: (x + 1) / 2).pvalue > 1e-3

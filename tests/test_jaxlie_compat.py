@@ -523,6 +523,21 @@ def test_manifold_side_by_side(dtype):
     ga = jaxlie_geo.manifold.grad(_cost(jaxlie_geo), argnums=(0, 1))(ours, ours_b)
     gr = jaxlie_ref.manifold.grad(_cost(jaxlie_ref), argnums=(0, 1))(ref, ref_b)
     same(ga, gr, "grad argnums")
+    # has_aux: (gradient, aux) from grad, ((value, aux), gradient) from value_and_grad
+    def with_aux(lib):
+        return lambda a, b: (_cost(lib)(a, b), {"tag": _cost(lib)(a, a)})
+
+    (g_aux, aux), (g_aux_ref, aux_ref) = (
+        jaxlie_geo.manifold.grad(with_aux(jaxlie_geo), has_aux=True)(ours, ours_b),
+        jaxlie_ref.manifold.grad(with_aux(jaxlie_ref), has_aux=True)(ref, ref_b),
+    )
+    same(g_aux, g_ref, "grad has_aux")
+    assert_close_compat(aux["tag"], aux_ref["tag"], dtype)
+    (v3, aux3), g3 = jaxlie_geo.manifold.value_and_grad(with_aux(jaxlie_geo), has_aux=True)(
+        ours, ours_b)
+    assert_close_compat(v3, v_ref, dtype)
+    assert_close_compat(aux3["tag"], aux_ref["tag"], dtype)
+    same(g3, g_ref, "value_and_grad has_aux")
 
 
 # ---------------------------------------------------------------------------------

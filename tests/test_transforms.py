@@ -422,6 +422,10 @@ def test_static_batch_axes_accept_lists(batch_axes):
         assert G.sample_uniform(jax.random.PRNGKey(0), batch_axes).get_batch_axes() == tuple(
             batch_axes
         )
+        # by keyword too (a list is not hashable as a static argument as it stands)
+        assert G.identity(batch_axes=batch_axes).get_batch_axes() == tuple(batch_axes)
+        key = jax.random.PRNGKey(0)
+        assert G.sample_uniform(key, batch_axes=batch_axes).get_batch_axes() == tuple(batch_axes)
 
 
 @over_groups_dtypes
