@@ -592,9 +592,9 @@ class MatrixLieGroup(abc.ABC):
     @abc.abstractmethod
     def normalize(self) -> Self:
         """Project the parameters back onto the group (same batch axes and dtype): the
-        rotation part divided by its norm (unit quaternion / complex), the translation kept. Any finite nonzero rotation
-        part works, whatever its scale (``_scalar.unit``); a zero or non-finite one has no
-        direction and gives NaN."""
+        rotation part divided by its norm (unit quaternion / complex), the translation
+        kept. Any finite nonzero rotation part works, whatever its scale
+        (``_scalar.unit``); a zero or non-finite one has no direction and gives NaN."""
 
     def jlog(self) -> jax.Array:
         """Jacobian of the log under right perturbations, the inverse right Jacobian at

@@ -145,8 +145,9 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
-        """``(*batch, 3) -> (*batch, 3, 3)``: J_r(ξ) = [[A, B, p_x], [−B, A, p_y], [0, 0, 1]], A = sin θ/θ, B = (1 − cos θ)/θ,
-        p = (θF2 ρx − F1 ρy, F1 ρx + θF2 ρy) (Solà et al. 2018, eq. 163)."""
+        """``(*batch, 3) -> (*batch, 3, 3)``: J_r(ξ) = [[A, B, p_x], [−B, A, p_y], [0, 0, 1]],
+        A = sin θ/θ, B = (1 − cos θ)/θ, p = (θF2 ρx − F1 ρy, F1 ρx + θF2 ρy) (Solà et al.
+        2018, eq. 163)."""
         xi = cls._check_tangent(tangent, "jac_right")
         th, x, f1, px, py = cls._jac_parts(xi)
         A, B = _scalar.sinc(x), th * f1
@@ -155,7 +156,8 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
-        """``(*batch, 3) -> (*batch, 3, 3)``: J_r⁻¹(ξ) = [[h, −θ/2, θG ρx + ρy/2], [θ/2, h, θG ρy − ρx/2], [0, 0, 1]] with
+        """``(*batch, 3) -> (*batch, 3, 3)``:
+        J_r⁻¹(ξ) = [[h, −θ/2, θG ρx + ρy/2], [θ/2, h, θG ρy − ρx/2], [0, 0, 1]] with
         h = (θ/2)cot(θ/2) = 1 − θ² G(θ²): ``jac_right`` inverted in closed form. Its
         translation column −M⁻¹p (p from Solà et al. 2018, eq. 163) simplifies, with
         1 − cos θ = 2 sin²(θ/2), to (θG I − ½ J) ρ, J the 90° rotation: one kernel (G)

@@ -163,7 +163,8 @@ class SE3(SEBase[SO3]):
 
     @override
     def adjoint(self) -> jax.Array:
-        """``(*batch, 6, 6)``: [[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41, permuted)."""
+        """``(*batch, 6, 6)``: [[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41,
+        permuted)."""
         R = self.rotation().as_matrix()
         tR = matmul(skew(self.translation()), R)
         zero = jnp.zeros_like(R)
@@ -205,15 +206,17 @@ class SE3(SEBase[SO3]):
     @classmethod
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
-        """``(*batch, 6) -> (*batch, 6, 6)``: J_r(ξ) = J_l(−ξ) = [[J_r(φ), Q(−ρ, −φ)], [0, J_r(φ)]] for ξ = (ρ, φ)."""
+        """``(*batch, 6) -> (*batch, 6, 6)``: J_r(ξ) = J_l(−ξ) = [[J_r(φ), Q(−ρ, −φ)],
+        [0, J_r(φ)]] for ξ = (ρ, φ)."""
         xi = cls._check_tangent(tangent, "jac_right")
         return cls._blocks(jac_right_so3(xi[..., 3:]), cls._q_block(xi))
 
     @classmethod
     @override
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
-        """``(*batch, 6) -> (*batch, 6, 6)``: J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]], J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ)
-        (block inverse of ``jac_right``, in closed form)."""
+        """``(*batch, 6) -> (*batch, 6, 6)``: J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]],
+        J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ) (block inverse of ``jac_right``, in closed
+        form)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
         # In memory before the products, which read every entry three times over.
         Jinv, Q = materialize(jac_right_inv_so3(xi[..., 3:]), cls._q_block(xi))

@@ -276,8 +276,9 @@ class SO3(SOBase):
 
     def compute_roll_radians(self) -> jax.Array:
         """Roll (rotation about x) of the ZYX convention, shape ``batch``, in [-π, π] (-π
-        only where atan2's sine argument is -0.0, as for ``SO2.as_radians``). Like ``as_matrix``, it
-        depends on the quaternion's direction only: atan2(2(wx + yz), w² + z² − x² − y²),
+        only where atan2's sine argument is -0.0, as for ``SO2.as_radians``). Like
+        ``as_matrix``, it depends on the quaternion's direction only:
+        atan2(2(wx + yz), w² + z² − x² − y²),
         where jaxlie's 1 − 2(x² + y²) assumes a unit quaternion."""
         w, x, y, z = (self.wxyz[..., i] for i in range(4))
         return jnp.arctan2(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))

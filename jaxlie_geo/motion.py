@@ -69,7 +69,9 @@ def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
             ``interpolate`` (a batch of times on one body: ``t`` of shape (K,)).
     """
     G = type(start)
-    velocity = G._check_tangent(velocity, "motion.pose_at", like=start.parameters(), name="velocity")
+    velocity = G._check_tangent(
+        velocity, "motion.pose_at", like=start.parameters(), name="velocity"
+    )
     return Geodesic(start, velocity)(t)
 
 
