@@ -129,6 +129,49 @@ def log_quaternion_parts(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Arr
     return u, 2.0 * ratio, h
 
 
+def _euler_zyx(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Array]:
+    """(roll φ, pitch θ, yaw ψ) of ``Rz(ψ) Ry(θ) Rx(φ)`` from a quaternion of any norm.
+
+    With half angles, q = qz(ψ) qy(θ) qx(φ) gives (up to q's sign and norm)
+
+        A = (w + y) + i(z − x) = (cos θ/2 + sin θ/2) e^{i(ψ − φ)/2},
+        B = (w − y) + i(z + x) = (cos θ/2 − sin θ/2) e^{i(ψ + φ)/2},
+
+    so ψ = arg(A B), φ = arg(B Ā), and θ = atan(2(wy − zx) / (|A| |B|)) (|A|² − |B|² =
+    4(wy − zx) = 2|q|² sin θ, |A| |B| = |q|² cos θ). A B and B Ā expand to the usual
+    (w² + x² − y² − z²) + 2i(wz + xy) and (w² + z² − x² − y²) + 2i(wx + yz), but the
+    sums forming A and B are single roundings (exact where they cancel, by Sterbenz), so at
+    and near gimbal lock (θ → ±π/2, B or A → 0) the small factor keeps full relative
+    accuracy: ψ and φ, each ill-conditioned there, come out with ψ − φ (or ψ + φ) correct
+    to a few ulp, the same in every compiled context, and ``from_rpy_radians`` of the three
+    angles gives the rotation back to a few ulp. The expanded sums cancel there into
+    rounding noise that differs between fusions (FMA contraction): reads of roll and yaw
+    from separately jitted calls gave O(1) round-trip errors at lock, and the asin of
+    2(wy − zx) loses half the digits of θ (NaN past ±1). Where B (or A) is exactly 0, it
+    is read as 1: ψ = −φ = arg A (or ψ = φ = arg B). A zero quaternion gives (0, 0, 0)."""
+    w, x, y, z = (wxyz[..., i] for i in range(4))
+    a_re, a_im, b_re, b_im = w + y, z - x, w - y, z + x
+
+    def one_if_zero(re: jax.Array, im: jax.Array) -> jax.Array:
+        return jnp.where((re == 0) & (im == 0), jnp.ones_like(re), re)
+
+    sin_ = 2.0 * (w * y - z * x)
+    a2, b2 = a_re * a_re + a_im * a_im, b_re * b_re + b_im * b_im
+    # atan of sin/cos (cos ≥ 0) costs 2/3 of atan2; where A or B is 0 (exactly at lock),
+    # ±π/2 with a zero derivative (the square roots are kept off 0, whose derivative is inf)
+    pos = (a2 > 0) & (b2 > 0)
+    one = jnp.ones_like(a2)
+    cos_ = jnp.sqrt(jnp.where(pos, a2, one)) * jnp.sqrt(jnp.where(pos, b2, one))
+    lock = ~pos & (sin_ != 0)
+    pitch = jnp.where(
+        lock, jnp.copysign(jnp.asarray(jnp.pi / 2, wxyz.dtype), sin_), jnp.arctan(sin_ / cos_)
+    )
+    a_re, b_re = one_if_zero(a_re, a_im), one_if_zero(b_re, b_im)
+    yaw = jnp.arctan2(a_re * b_im + a_im * b_re, a_re * b_re - a_im * b_im)
+    roll = jnp.arctan2(a_re * b_im - a_im * b_re, a_re * b_re + a_im * b_im)
+    return roll, pitch, yaw
+
+
 def quaternion_product(p: jax.Array, q: jax.Array) -> jax.Array:
     """Hamilton product of ``(w, x, y, z)`` quaternions (batch axes broadcast)."""
     w1, x1, y1, z1 = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
@@ -268,36 +311,29 @@ class SO3(SOBase):
 
     def as_rpy_radians(self) -> hints.RollPitchYaw:
         """ZYX Euler angles (roll, pitch, yaw), each of shape ``batch``."""
-        return hints.RollPitchYaw(
-            roll=self.compute_roll_radians(),
-            pitch=self.compute_pitch_radians(),
-            yaw=self.compute_yaw_radians(),
-        )
+        roll, pitch, yaw = _euler_zyx(self.wxyz)
+        return hints.RollPitchYaw(roll=roll, pitch=pitch, yaw=yaw)
 
     def compute_roll_radians(self) -> jax.Array:
-        """Roll (rotation about x) of the ZYX convention, shape ``batch``, in [-π, π] (-π
-        only where atan2's sine argument is -0.0, as for ``SO2.as_radians``). Like
-        ``as_matrix``, it depends on the quaternion's direction only:
-        atan2(2(wx + yz), w² + z² − x² − y²),
-        where jaxlie's 1 − 2(x² + y²) assumes a unit quaternion."""
-        w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arctan2(2.0 * (w * x + y * z), (w * w + z * z) - (x * x + y * y))
+        """Roll (rotation about x) of the ZYX convention, shape ``batch``, in [-π, π].
+        Read so that ``from_rpy_radians`` of the three angles gives the rotation back to a
+        few ulp also at and near gimbal lock (pitch ±π/2), where roll and yaw alone are
+        undefined or ill-conditioned: see ``_euler_zyx``. Like ``as_matrix``, it depends on
+        the quaternion's direction only."""
+        return _euler_zyx(self.wxyz)[0]
 
     def compute_pitch_radians(self) -> jax.Array:
         """Pitch (rotation about y) of the ZYX convention, shape ``batch``, in [-π/2, π/2]:
-        asin(2(wy − zx)/‖q‖²), direction only (a quaternion 5% long read π/2 for a pitch of
-        1.3 when the unit formula was clipped). The sine is clipped to [-1, 1], so rounding
-        at gimbal lock gives ±π/2, never NaN; a zero quaternion (no rotation) gives NaN."""
-        w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        n2 = (w * w + x * x) + (y * y + z * z)
-        return jnp.arcsin(jnp.clip(2.0 * (w * y - z * x) / n2, -1.0, 1.0))
+        atan(sin/cos) with both read off the quaternion, accurate to a few ulp at gimbal
+        lock too (jaxlie's asin of the sine loses half the digits there, and rounding past
+        ±1 gives NaN); direction only (see ``_euler_zyx``). A zero quaternion gives 0."""
+        return _euler_zyx(self.wxyz)[1]
 
     def compute_yaw_radians(self) -> jax.Array:
-        """Yaw (rotation about z) of the ZYX convention, shape ``batch``, in [-π, π] (as
-        roll); direction only:
-        atan2(2(wz + xy), w² + x² − y² − z²)."""
-        w, x, y, z = (self.wxyz[..., i] for i in range(4))
-        return jnp.arctan2(2.0 * (w * z + x * y), (w * w + x * x) - (y * y + z * z))
+        """Yaw (rotation about z) of the ZYX convention, shape ``batch``, in [-π, π];
+        direction only: the angle of (w² + x² − y² − z², 2(wz + xy)), computed as a product
+        that stays accurate at gimbal lock (see ``_euler_zyx``)."""
+        return _euler_zyx(self.wxyz)[2]
 
     @classmethod
     @override
