@@ -114,8 +114,9 @@ class SE3(SEBase[SO3]):
     def exp(cls, tangent: hints.Array) -> SE3:
         """``(*batch, 6)`` tangent (v, ω) -> SE3 of batch ``batch``.
 
-        q = exp_SO3(ω); t = V v = v + F1 (ω × v) + F2 (ω × (ω × v)), θ = ‖ω‖
-        (seed 001 eq. 36 with θ = |ω|, as cross products: no 3×3 matrices). On CPU a
+        q = exp_SO3(ω); t = V v, θ = ‖ω‖, evaluated as F0 v + F1 (ω × v) + F2 (ω·v) ω
+        (seed 000 §8.4; equal to seed 001 eq. 36's v + F1 ω × v + F2 ω × (ω × v), which
+        cancels beyond π: ``exp_translation``), as cross products: no 3×3 matrices. On CPU a
         batch of at least 2^19 runs in 2^16-element chunks (``_batch.in_chunks``: 10^6
         elements, float32, 39 → 29 ns/element). Rotation angles as in ``SO3.exp``: any θ
         whose square is finite (float32 θ < 1.8e19), NaN beyond."""
@@ -140,8 +141,9 @@ class SE3(SEBase[SO3]):
     def log(self) -> jax.Array:
         """Tangent (v, ω), ``(*batch, 6)``, with ‖ω‖ in [0, π].
 
-        ω = log_SO3(q); v = V⁻¹ t = t − ½ ω × t + G(θ²) ω × (ω × t), where
-        G = (1 − (θ/2)cot(θ/2))/θ² (seed 000 §9's (θ/2)cot(θ/2) form, as a kernel)."""
+        ω = log_SO3(q); v = V⁻¹ t (= t − ½ ω × t + G ω × (ω × t), Barfoot eq. 7.85),
+        evaluated as h t − ½ ω × t + G (ω·t) ω with h = (θ/2)cot(θ/2) and
+        G = (1 − h)/θ² (seed 000 §9: no cancellation near π; ``log_translation``)."""
         p = materialize(self.wxyz_xyz)
         u, s, h = log_quaternion_parts(p[..., :4])
         v = log_translation(p[..., 4:], u, s, h, _KERNEL_FORM)

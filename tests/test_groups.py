@@ -184,18 +184,24 @@ def test_exp_at_enormous_angles(dtype):
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64], ids=lambda d: jnp.dtype(d).name)
 def test_log_is_scale_invariant_over_the_documented_norms(dtype):
-    # _scalar.atan2_over: any norm whose square is a normal float (1e-19..1e19 in float32).
-    # The rotation, and so the log, depends on q's direction only; SE3.log's translation
-    # part once carried a stray 1/‖q‖ (exp(log T) off by 0.5 at ‖q‖ = 2).
-    big = 1e18 if dtype == jnp.float32 else 1e150
+    """_scalar.atan2_over: 1e-15 < ‖q‖ < 4e18 in float32, 1e-145 < ‖q‖ < 1e153 in float64
+    (below, the squares of small components flush to zero; above, (w + r)² overflows).
+    The rotation, and so the log, depends on q's direction only; SE3.log's translation
+    part once carried a stray 1/‖q‖ (exp(log T) off by 0.5 at ‖q‖ = 2). The 5th and 6th
+    rows have a small component (0.05, 0.0005): at 1e-18 the first read 8e3 ulp wrong."""
+    small, big = (1e-15, 4e18) if dtype == jnp.float32 else (1e-145, 1e153)
     q = np.array([[0.6, 0.8, 0.0, 0.0], [0.0, 0.0, 0.6, -0.8], [1.0, 0.0, 0.0, 0.0]], dtype)
-    q = np.concatenate([q, to_np(SO3.exp(np.array([[0.3, -0.5, 0.9]], dtype)).wxyz)])
-    t = np.array([[1.0, -2.0, 0.5]] * 4, dtype)
+    q = np.concatenate([q, to_np(SO3.exp(np.array([[0.3, -0.5, 0.9], [0.3, 0.2, -0.1],
+                                                   [3.1, 0.001, 0.2]], dtype)).wxyz)]).astype(dtype)
+    t = np.array([[1.0, -2.0, 0.5]] * len(q), dtype)
     so3, se3 = to_np(SO3(q).log()), to_np(SE3(np.concatenate([q, t], -1)).log())
-    for scale in (1.0 / big, 1e-3, 0.5, 1.001, 2.0, 1e3, big):
-        assert_close(SO3(q * scale).log(), so3, dtype)
+    eps = float(jnp.finfo(dtype).eps)
+    for scale in (small, 1e-3, 0.5, 1.001, 2.0, 1e3, big):
+        np.testing.assert_allclose(to_np(SO3(q * scale).log()), so3, rtol=0, atol=8 * eps,
+                                   err_msg=f"‖q‖ = {scale:g}")
         if 1e-3 <= scale <= 1e3:
-            assert_close(SE3(np.concatenate([q * scale, t], -1)).log(), se3, dtype)
+            np.testing.assert_allclose(to_np(SE3(np.concatenate([q * scale, t], -1)).log()), se3,
+                                       rtol=0, atol=16 * eps, err_msg=f"‖q‖ = {scale:g}")
 
 
 @pytest.mark.parametrize("G", [SO3, SE3], ids=lambda G: G.__name__)
@@ -956,6 +962,31 @@ def test_integer_inputs_keep_float32_of_the_element(G):
         R = T.rotation()
         E = G.from_rotation_and_translation(R, np.ones((3, G.space_dim), np.int32))
         assert E.parameters().dtype == jnp.float32, E.parameters().dtype
+
+
+@over_groups
+def test_integer_parameters(G):
+    """An integer rotation with a float translation keeps the translation's fractions (the
+    pair takes the promoted dtype); ``inverse`` and ``@`` of integer elements are exact
+    (integer for SO2, SE2 and SO3, the default float for SE3, as documented)."""
+    k = G.parameters_dim
+    p = np.zeros(k, np.int32)
+    p[0] = 1
+    if G in (SO3, SE3):
+        p[:4] = [0, 0, 1, 0]  # a half turn about y, integer
+    T = G(jnp.asarray(p))
+    if is_se(G):
+        t = np.linspace(0.25, 1.5, G.space_dim)
+        E = G.from_rotation_and_translation(T.rotation(), t)
+        assert jnp.issubdtype(E.parameters().dtype, jnp.floating)
+        np.testing.assert_array_equal(to_np(E.translation()), t)
+        T = G(jnp.asarray(np.concatenate([p[: k - G.space_dim], np.arange(1, G.space_dim + 1)]),
+                          jnp.int32))
+    F = G(T.parameters().astype(jnp.float64))
+    for got, want in ((T.inverse(), F.inverse()), (T @ T, F @ F)):
+        integer = G is not SE3
+        assert jnp.issubdtype(got.parameters().dtype, jnp.integer) == integer, got.parameters().dtype
+        np.testing.assert_array_equal(to_np(got.parameters()).astype(np.float64), to_np(want.parameters()))
 
 
 def test_angle_of_a_half_turn():
