@@ -64,9 +64,14 @@ def test_propagate_compose_independent_and_correlated(G):
     mc = _empirical_cov(jax.jit(residual)(da, db))
     _assert_cov_close(uncertainty.propagate_compose(a, cov_a, b, cov_b), mc)
 
-    # correlated operands: one joint Gaussian over (δa, δb), correlation 0.9
+    # correlated operands: one joint Gaussian over (δa, δb) whose cross block E[δa δbᵀ] is
+    # not symmetric (a symmetric one cannot tell J_a Σ_ab J_bᵀ from J_b Σ_ab J_aᵀ)
+    # δb = M δa + ε, M a random rotation scaled by 0.9: E[δa δbᵀ] = C Mᵀ
     C = _random_cov(k, 3)
-    joint = np.block([[C, 0.9 * C], [0.9 * C, C]])
+    M = 0.9 * np.linalg.qr(np.random.default_rng(4).normal(size=(k, k)))[0]
+    cab = C @ M.T
+    joint = np.block([[C, cab], [cab.T, M @ C @ M.T + 0.2 * C]])
+    assert k == 1 or np.abs(cab - cab.T).max() > 0.5 * np.abs(cab).max()  # SO2: 1×1
     d = _draws(kj, joint)
     mc = _empirical_cov(jax.jit(residual)(d[:, :k], d[:, k:]))
     got = uncertainty.propagate_compose(
