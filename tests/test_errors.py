@@ -373,3 +373,9 @@ def test_odd_parameter_dtypes_and_reshape_sizes():
     p = T.parameters()
     assert p.dtype == jnp.float16 and bool(jnp.all(jnp.isfinite(p)))
     assert 0.03 < float(jnp.std(p[:, 4:].astype(jnp.float32))) < 0.2  # σ = 0.1
+
+
+def test_broadcast_leading_axes_names_a_scalar_input():
+    """A scalar among the inputs has no trailing axis: a named ValueError, not IndexError."""
+    with pytest.raises(ValueError, match=r"broadcast_leading_axes: input 1 .*got \(\)"):
+        jaxlie_geo.utils.broadcast_leading_axes((SE3.identity((3,)), 1.0))

@@ -592,7 +592,7 @@ def test_iteration_truthiness_and_static_index_range(G):
     # static integers out of range raise, as in NumPy (JAX alone would clamp to the end)
     # (also after ..., and in static integer lists and NumPy arrays; these once clamped)
     for index in (3, -4, (0, 2), (slice(None), -3), (None, 5), (..., 2), (..., -3), (0, ..., 5),
-                  [3], np.array([0, 3]), ([0, 1], ..., [2]), (0, 1, 0)):
+                  [3], np.array([0, 3]), ([0, 1], ..., [2]), (0, 1, 0), (..., None, 2)):
         with pytest.raises(IndexError, match="out of range"):
             T[index]
     np.testing.assert_array_equal(to_np(T[-3, -2].parameters()), p[0, 0])
@@ -1358,3 +1358,29 @@ def test_sample_uniform_is_haar():
     for G in (SE2, SE3):
         t = to_np(G.sample_uniform(key, (n,)).translation()).ravel()
         assert scipy.stats.kstest(t, lambda x: (x + 1) / 2).pvalue > 1e-3
+
+
+@over_groups
+def test_stack_axis_counts_batch_axes(G):
+    """``stack(..., axis)`` counts among the batch axes, as ``np.stack`` on the batch:
+    axis=-1 adds the last batch axis (the parameter axis stays last), and an axis past
+    the batch rank raises instead of wrapping."""
+    T, U = random_element(G, 1, (4,), np.float64), random_element(G, 2, (4,), np.float64)
+    p, q = to_np(T.parameters()), to_np(U.parameters())
+    S = jaxlie_geo.stack([T, U], axis=-1)
+    assert S.get_batch_axes() == (4, 2)
+    np.testing.assert_array_equal(to_np(S.parameters()), np.stack([p, q], axis=-2))
+    for axis in (2, -3):
+        with pytest.raises(ValueError, match="out of range"):
+            jaxlie_geo.stack([T, U], axis=axis)
+
+
+@over_groups
+def test_times_follow_numpy_promotion(G):
+    """A float64 NumPy ``t`` with float32 elements under x64 gives float64, as documented for
+    NumPy float64 inputs (and as ``T @ G.exp(np.zeros(k))`` does)."""
+    T, U = random_element(G, 1, (), np.float32), random_element(G, 2, (), np.float32)
+    t = np.array([0.25, 0.5], np.float64)
+    assert (T @ G.exp(np.zeros(G.tangent_dim))).parameters().dtype == jnp.float64
+    for out in (T.interpolate(U, t), jaxlie_geo.geodesic(T, U)(t)):
+        assert out.parameters().dtype == jnp.float64, out.parameters().dtype

@@ -59,3 +59,15 @@ def test_elements_of_neither_library_pass_through():
     assert to_jaxlie(jnp.ones(3)).shape == (3,)
     assert from_jaxlie(jaxlie_geo.SO3.identity()).wxyz.shape == (4,)  # ours stay ours
     assert isinstance(to_jaxlie(jaxlie.SO3.identity()), jaxlie.SO3)  # theirs stay theirs
+
+
+def test_round_trip_keeps_negative_zeros():
+    """Re-wrapping does no arithmetic: −0.0 components (an inverse's conjugate makes them)
+    keep their sign bit both ways (assert_array_equal treats −0.0 == +0.0)."""
+    for T in (jaxlie_geo.SO3.identity().inverse(), jaxlie_geo.SE3.identity().inverse()):
+        p = np.asarray(T.parameters())
+        assert np.signbit(p).any()
+        for back in (from_jaxlie(to_jaxlie(T)).parameters(), to_jaxlie(T).parameters()):
+            np.testing.assert_array_equal(np.asarray(back).view(np.uint32 if p.dtype == np.float32
+                                                                else np.uint64), p.view(
+                np.uint32 if p.dtype == np.float32 else np.uint64))

@@ -167,6 +167,17 @@ def test_mean_weights_batches_and_errors():
         got = uncertainty.mean(xs, weights=np.array([w_a, w_b]))
         want = a.interpolate(b, w_b / (w_a + w_b))
         np.testing.assert_allclose(to_np(got.as_matrix()), to_np(want.as_matrix()), atol=1e-12)
+    # default weights are 1/n: two points give the midpoint (1/(n−1) over-relaxes and
+    # oscillates about it)
+    np.testing.assert_allclose(to_np(uncertainty.mean(xs).as_matrix()),
+                               to_np(a.interpolate(b, 0.5).as_matrix()), atol=1e-12)
+    # the iteration cap: 0 iterations return the start (the first pose), 1 iteration is one
+    # step μ₁ = x₀ ⊕ mean_i log(x₀⁻¹ xᵢ), written out here
+    np.testing.assert_array_equal(to_np(uncertainty.mean(xs, max_iters=0).parameters()),
+                                  to_np(a.parameters()))
+    step = a @ SE3.exp(0.5 * (a.inverse() @ a).log() + 0.5 * (a.inverse() @ b).log())
+    np.testing.assert_allclose(to_np(uncertainty.mean(xs, max_iters=1).as_matrix()),
+                               to_np(step.as_matrix()), atol=1e-12)
     with pytest.raises(ValueError, match="at least one batch axis"):
         uncertainty.mean(SO3.identity())
     with pytest.raises(ValueError, match=r"weights.*\(2,\)"):
