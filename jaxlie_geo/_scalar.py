@@ -465,11 +465,11 @@ def atan2_over(n2: jax.Array, w: jax.Array) -> jax.Array:
     with A(s) = atan(√s)/√s = Σ (−1)ᵏ sᵏ/(2k+1) summed as a polynomial (s ≤ 0.172).
     No branch, no √n2: values and derivatives of every order are smooth and accurate
     from n = 0 (the identity) to w = 0 (θ = π) inclusive, for 1e-15 < ‖q‖ < 4e18 in
-    float32 (1e-145 < ‖q‖ < 1e153 in float64), measured against mpmath. Below, the squares
-    of small components flush to zero (2^-126: a component's square lost is ε‖q‖² only
-    where ‖q‖ ≳ 2^-51.5) while w does not, and the angle is wrong (8e3 ulp at 1e-18);
-    above, (w + r)² overflows (from about 9e18) and the result is 0. (A rotation's
-    quaternion has ‖q‖ ≈ 1.)"""
+    float32 (1e-145 < ‖q‖ < 1e153 in float64), measured against mpmath. Below, squares
+    under 2^-126 flush to zero while w does not; what is lost stays under ε‖q‖² only for
+    ‖q‖ ≳ 2^-51.5 ≈ 3e-16, and the angle is wrong (8e3 ulp at 1e-18). Above, (w + r)²
+    overflows (from about 9e18) and the result is 0. (A rotation's quaternion has
+    ‖q‖ ≈ 1.)"""
     wr = w + jnp.sqrt(n2 + w * w)
     inv = 1.0 / (wr + jnp.sqrt(wr * wr + n2))  # 1/((w + r)(1 + √(1 + u²)))
     return 4.0 * _horner("atan", n2 * inv * inv, _ATAN_X_MAX) * inv

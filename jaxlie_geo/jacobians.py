@@ -82,8 +82,7 @@ def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``τ = log(a⁻¹ @ b)`` (the pose-graph residual, ``manifold.rminus``)
     w.r.t. ``a`` and ``b``: ``(−J_l⁻¹(τ), J_r⁻¹(τ))``, each ``(*batch, k, k)``. SO3 at
     10^5 (float32, 2 cores): 42–50 ns/element through ``jac_left_inv``/``jac_right_inv``,
-    17–22 through ``jlog``
-    and J_l⁻¹ = J_r⁻¹ᵀ."""
+    17–22 through ``jlog`` and J_l⁻¹ = J_r⁻¹ᵀ."""
     G = type(a)
     e = a._between(b)
     J_r_inv = e.jlog()  # the log is principal: the groups' faster jlog applies
