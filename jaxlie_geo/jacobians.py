@@ -29,7 +29,7 @@ of ``hat(eᵢ) p̃`` (p̃ = (p, 1) for SE groups), e.g. [I, −p̂] for SE(3), �
 
 from __future__ import annotations
 
-from typing import Sequence, Tuple, TypeVar
+from typing import Sequence, Tuple, Type, TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -105,7 +105,7 @@ def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
 
 
 @jit_function("G")
-def exp(G: type, tangent: hints.Array) -> jax.Array:
+def exp(G: Type[MatrixLieGroup], tangent: hints.Array) -> jax.Array:
     """Jacobian of ``G.exp`` at ``tangent`` (``(*batch, k)``): the right Jacobian ``J_r``,
     ``(*batch, k, k)``."""
     return G.jac_right(tangent)
@@ -118,7 +118,7 @@ def log(a: MatrixLieGroup) -> jax.Array:
     return a.jlog()
 
 
-def _generators(G: type) -> onp.ndarray:
+def _generators(G: Type[MatrixLieGroup]) -> onp.ndarray:
     """The generators hat(eᵢ) as a NumPy constant ``(k, n, n)`` (entries 0 and ±1)."""
     with jax.ensure_compile_time_eval():
         return onp.asarray(G.hat(onp.eye(G.tangent_dim)))
@@ -152,7 +152,7 @@ def _matmul(A: jax.Array, B: jax.Array) -> jax.Array:
 
 
 @jit_function("G")
-def generator_action(G: type, points: hints.Array) -> jax.Array:
+def generator_action(G: Type[MatrixLieGroup], points: hints.Array) -> jax.Array:
     """K(p): ``d (hat(δ) p̃)[:space_dim] / dδ``, shape ``(*batch, space_dim, tangent_dim)``
     (p̃ = (p, 1) for SE groups): e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3). Entry (i, j)
     is Σ_l hat(e_j)[i, l] p̃_l, written out from the constant generators."""

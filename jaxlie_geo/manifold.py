@@ -7,7 +7,7 @@ plain arrays (handled with ordinary + and −).
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence, Union
+from typing import Any, Callable, Sequence, TypeVar, Union
 
 import jax
 import jax.numpy as jnp
@@ -17,12 +17,16 @@ from ._base import MatrixLieGroup, check_elements
 TangentPytree = Any
 """The pytree of tangents of a pytree of elements (arrays in place of groups)."""
 
+PytreeT = TypeVar("PytreeT")
+"""A pytree that may mix group elements and arrays; ``rplus`` and ``normalize_all`` return
+one of the same type (an ``SE3`` for an ``SE3``)."""
+
 
 def _is_group(x: Any) -> bool:
     return isinstance(x, MatrixLieGroup)
 
 
-def _map(f_group: Callable, f_array: Callable, tree: Any, *rest: Any) -> Any:
+def _map(f_group: Callable[..., Any], f_array: Callable[..., Any], tree: Any, *rest: Any) -> Any:
     return jax.tree.map(
         lambda x, *r: f_group(x, *r) if _is_group(x) else f_array(x, *r),
         tree,
@@ -31,7 +35,7 @@ def _map(f_group: Callable, f_array: Callable, tree: Any, *rest: Any) -> Any:
     )
 
 
-def rplus(transform: Any, delta: TangentPytree) -> Any:
+def rplus(transform: PytreeT, delta: TangentPytree) -> PytreeT:
     """Right plus, ``T ⊕ δ = T @ exp(δ)`` for each group leaf, ``x + δ`` for arrays.
 
     ``delta`` has ``transform``'s tree structure, with a ``(*batch, tangent_dim)`` array
@@ -61,20 +65,20 @@ def zero_tangents(pytree: Any) -> TangentPytree:
     )
 
 
-def normalize_all(pytree: Any) -> Any:
+def normalize_all(pytree: PytreeT) -> PytreeT:
     """``normalize()`` every group element of a pytree (same structure, batch axes and
     dtypes); arrays pass through."""
     return _map(lambda T: T.normalize(), lambda x: x, pytree)
 
 
 def value_and_grad(
-    fun: Callable,
+    fun: Callable[..., Any],
     argnums: Union[int, Sequence[int]] = 0,
     has_aux: bool = False,
     holomorphic: bool = False,
     allow_int: bool = False,
     reduce_axes: Sequence[Any] = (),
-) -> Callable:
+) -> Callable[..., Any]:
     """Like ``jax.value_and_grad`` (same parameters, in jaxlie's positional order), but
     gradients of group arguments are taken with respect to a right perturbation δ in the
     tangent space, ``d f(T ⊕ δ)/dδ`` at δ = 0: an element of batch ``batch`` gets a
@@ -101,13 +105,13 @@ def value_and_grad(
 
 
 def grad(
-    fun: Callable,
+    fun: Callable[..., Any],
     argnums: Union[int, Sequence[int]] = 0,
     has_aux: bool = False,
     holomorphic: bool = False,
     allow_int: bool = False,
     reduce_axes: Sequence[Any] = (),
-) -> Callable:
+) -> Callable[..., Any]:
     """Like ``jax.grad``, with tangent-space gradients for group arguments: a
     ``(*batch, tangent_dim)`` array per element (see ``value_and_grad``)."""
     vg = value_and_grad(fun, argnums, has_aux, holomorphic, allow_int, reduce_axes)
