@@ -348,6 +348,24 @@ def test_tree_map_eval_shape_and_leaves(G, dtype):
     assert mats.shape == (3, G.matrix_dim, G.matrix_dim) and mats.dtype == dtype
 
 
+@over_groups_dtypes
+def test_pickle_and_copy_round_trip(G, dtype):
+    """multiprocessing, checkpoints written with pickle, and ``copy.deepcopy`` of a config
+    holding poses: the class, dtype and every parameter bit survive, and the copy is a
+    new, still frozen element."""
+    import copy
+    import pickle
+
+    T = random_element(G, 6, (3,), dtype)
+    for U in (pickle.loads(pickle.dumps(T)), copy.deepcopy(T), copy.copy(T)):
+        assert type(U) is G and U is not T
+        assert U.parameters().dtype == dtype
+        np.testing.assert_array_equal(to_np(U.parameters()), to_np(T.parameters()))
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(U, dataclasses.fields(G)[0].name, T.parameters())
+        assert_close((U @ T.inverse()).log(), np.zeros((3, G.tangent_dim)), dtype)
+
+
 def test_pytree_structures_name_the_class():
     """Elements of different groups never share a tree structure, so ``jax.jit`` cannot
     serve one group the computation compiled for another. (Classes registered with
