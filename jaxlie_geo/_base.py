@@ -19,6 +19,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import functools
+import importlib
 import inspect
 import math
 import re
@@ -265,9 +266,8 @@ def _setattr_if_mutable(self: Any, name: str, value: Any) -> None:
     object.__setattr__(self, name, value)
 
 
-_flax_serialization: Any
 try:  # flax is optional: serialization is registered only where it imports
-    from flax import serialization as _flax_serialization
+    _flax_serialization: Any = importlib.import_module("flax.serialization")
 except Exception:  # absent, or broken against this jax: then there is nothing to register
     _flax_serialization = None
 

@@ -12,6 +12,7 @@ jaxlie is an optional dependency: it is imported on first use, and its absence r
 
 from __future__ import annotations
 
+import importlib
 from typing import Any, Dict, Tuple
 
 import jax
@@ -27,8 +28,8 @@ _OURS: Tuple[type, ...] = (SO2, SE2, SO3, SE3)
 
 def _jaxlie_types() -> Dict[type, type]:
     """Map each of our group classes to jaxlie's class of the same name."""
-    try:
-        import jaxlie
+    try:  # optional: imported by name, so that type checkers need not find it
+        jaxlie = importlib.import_module("jaxlie")
     except ImportError as e:  # pragma: no cover - the test extra installs jaxlie
         raise ImportError(
             "jaxlie_geo.interop needs jaxlie: pip install 'jaxlie==1.5.*'"
@@ -67,10 +68,10 @@ def from_jaxlie(tree: Any) -> Any:
         The same structure with jaxlie_geo elements in place of jaxlie's.
     """
     theirs_to_ours = {v: k for k, v in _jaxlie_types().items()}
-    import jaxlie
+    base = importlib.import_module("jaxlie").MatrixLieGroup  # (imported by _jaxlie_types)
 
     def is_theirs(x: Any) -> bool:
-        return isinstance(x, jaxlie.MatrixLieGroup)
+        return isinstance(x, base)
 
     def convert(x: Any) -> Any:
         if is_theirs(x):
