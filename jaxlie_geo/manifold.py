@@ -17,9 +17,7 @@ from ._base import MatrixLieGroup, check_elements
 TangentPytree = Any
 """The pytree of tangents of a pytree of elements (arrays in place of groups)."""
 
-PytreeT = TypeVar("PytreeT")
-"""A pytree that may mix group elements and arrays; ``rplus`` and ``normalize_all`` return
-one of the same type (an ``SE3`` for an ``SE3``)."""
+_PytreeT = TypeVar("_PytreeT")  # rplus and normalize_all return their argument's type
 
 
 def _is_group(x: Any) -> bool:
@@ -35,7 +33,7 @@ def _map(f_group: Callable[..., Any], f_array: Callable[..., Any], tree: Any, *r
     )
 
 
-def rplus(transform: PytreeT, delta: TangentPytree) -> PytreeT:
+def rplus(transform: _PytreeT, delta: TangentPytree) -> _PytreeT:
     """Right plus, ``T ⊕ δ = T @ exp(δ)`` for each group leaf, ``x + δ`` for arrays.
 
     ``delta`` has ``transform``'s tree structure, with a ``(*batch, tangent_dim)`` array
@@ -65,7 +63,7 @@ def zero_tangents(pytree: Any) -> TangentPytree:
     )
 
 
-def normalize_all(pytree: PytreeT) -> PytreeT:
+def normalize_all(pytree: _PytreeT) -> _PytreeT:
     """``normalize()`` every group element of a pytree (same structure, batch axes and
     dtypes); arrays pass through."""
     return _map(lambda T: T.normalize(), lambda x: x, pytree)
