@@ -35,6 +35,34 @@ CHUNKED_FROM = 2**19
 """Smallest batch ``in_chunks`` splits; below it the batch is evaluated whole."""
 
 
+def _batch_may_be_sharded() -> bool:
+    """Whether a traced batch may be split over several CPU devices (jax's sharding: a
+    mesh of ``--xla_force_host_platform_device_count`` devices or several hosts). The
+    chunk loop slices the batch axis: with a batch sharded across devices, XLA gathers
+    the whole batch on every device (Auto axes) or refuses to trace (Explicit axes), so
+    chunks run only where one CPU device exists or inside ``shard_map``, which hands the
+    function each device's own shard."""
+    try:
+        if jax.device_count("cpu") == 1:
+            return False
+    except RuntimeError:  # no CPU backend (JAX_PLATFORMS): the chunks are never lowered
+        return False
+    get_mesh = getattr(jax.sharding, "get_abstract_mesh", None)
+    mesh = get_mesh() if get_mesh is not None else None
+    manual = set(getattr(mesh, "manual_axes", ()))
+    return mesh is None or mesh.empty or not set(mesh.axis_names) <= manual
+
+
+def _zeros_like_leaves(leaves: Sequence[jax.Array], shape: Tuple[int, ...], dtype: Any) -> jax.Array:
+    """Zeros of ``shape`` and ``dtype`` that vary over every manual mesh axis some leaf
+    varies over: inside ``shard_map`` a loop's carry keeps one type, and chunks computed
+    from a device's own shard, written into a device-invariant zero buffer, failed to
+    trace. ``lax.full_like`` takes the type of its example, here a scalar that depends on
+    every leaf (and is then dead code: only its type is used)."""
+    probe = sum(jnp.sum(x[:1]).astype(dtype) for x in leaves)
+    return jax.lax.full_like(probe, 0, dtype, shape)
+
+
 def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
     """``f(*args)``, evaluated ``CHUNK`` elements at a time into one output buffer on CPU
     when the batch has at least ``CHUNKED_FROM`` elements; otherwise, on other backends and
@@ -56,15 +84,17 @@ def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
     predecessor rather than padding, which would copy every input). Derivatives (a custom
     JVP) differentiate the whole-batch ``f``: through the chunk loop, SE3's gradient at
     10^6 took 720 ns/element against 424. GPUs are left whole: a loop there syncs with the
-    host every iteration, and it is not measured.
+    host every iteration, and it is not measured. With several CPU devices the batch may
+    be sharded, and it is evaluated whole (see ``_batch_may_be_sharded``) except inside
+    ``shard_map``.
     """
     n = static_size(batch)
     leaves = jax.tree_util.tree_leaves(args)
     if any(tuple(x.shape[: len(batch)]) != tuple(batch) for x in leaves):
         shapes = [tuple(x.shape) for x in leaves]
         raise ValueError(f"in_chunks: every input needs leading axes {batch}, got {shapes}.")
-    if n is None or not CHUNKED_FROM <= n < 2**31:  # symbolic; int32 chunk offsets
-        return f(*args)
+    if n is None or not CHUNKED_FROM <= n < 2**31 or _batch_may_be_sharded():
+        return f(*args)  # symbolic; int32 chunk offsets; split over devices
     flat = [x.reshape((n,) + x.shape[len(batch) :]) for x in leaves]
     treedef = jax.tree_util.tree_structure(args)
 
@@ -77,7 +107,9 @@ def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
 
     def chunked(*leaves: jax.Array) -> Any:
         shapes = jax.eval_shape(piece, 0, leaves)
-        out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
+        out = jax.tree_util.tree_map(
+            lambda s: _zeros_like_leaves(leaves, (n,) + s.shape[1:], s.dtype), shapes
+        )
 
         def body(i: Any, out: Any) -> Any:
             start = jnp.minimum(i * CHUNK, n - CHUNK)

@@ -9,6 +9,9 @@ composition (jaxlie's definition of ``jlog``).
 from __future__ import annotations
 
 import dataclasses
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -715,6 +718,73 @@ def test_in_chunks_equals_whole_batch(G, op, f, dtype, small_chunks):
         assert_close(g, w, dtype, 16)
     assert_close(stacked[0], want, dtype, 4)
     assert_close(stacked[1], f(*(a[::-1] for a in args)), dtype, 4)
+
+
+_SHARDED_SCRIPT = r"""
+import os, sys
+os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=4"
+import jax, jax.numpy as jnp, numpy as np
+from jax.sharding import NamedSharding, PartitionSpec as P
+import jaxlie_geo
+from jaxlie_geo import _batch
+
+_batch.CHUNK, _batch.CHUNKED_FROM = 256, 512  # chunk a test-sized batch (as small_chunks)
+n = 4096  # 1024 per device: shard_map's per-device batch is chunked too
+rng = np.random.default_rng(0)
+ops = {}
+for G in (jaxlie_geo.SE2, jaxlie_geo.SO3, jaxlie_geo.SE3):
+    if G._interpolate_in_chunks:
+        ops[G.__name__ + ".interpolate"] = (
+            lambda a, b, t, G=G: G.exp(a).interpolate(G.exp(b), t).parameters(), G.tangent_dim)
+ops["SE3.exp"] = (lambda a, b, t: jaxlie_geo.SE3.exp(a * t[..., None]).parameters(), 6)
+ops["SE3.grad"] = (lambda a, b, t: jax.grad(
+    lambda a: jnp.sum(jaxlie_geo.SE3.exp(a).interpolate(jaxlie_geo.SE3.exp(b), t).log() ** 2))(a), 6)
+AxisType = getattr(jax.sharding, "AxisType", None)
+for kind in ("Auto", "Explicit") if AxisType is not None else ("default",):
+    extra = {} if AxisType is None else {"axis_types": (getattr(AxisType, kind),)}
+    mesh = jax.make_mesh((4,), ("b",), **extra)
+    for name, (f, k) in ops.items():
+        # angles well below π: the gradient of log is ill-conditioned near π (60-80 ulp
+        # between any two evaluation orders there), which is not what this test is about
+        a, b = (0.5 * rng.normal(size=(n, k)).astype(np.float32) for _ in range(2))
+        t = rng.uniform(-0.5, 1.5, n).astype(np.float32)
+        want = np.asarray(jax.jit(f)(a, b, t))  # on one device, whole
+        args = [jax.device_put(x, NamedSharding(mesh, P("b"))) for x in (a, b, t)]
+        got = jax.jit(f)(*args)
+        assert tuple(got.sharding.spec)[:1] == ("b",), (kind, name, got.sharding)
+        hlo = jax.jit(f).lower(*args).compile().as_text()
+        assert "all-gather" not in hlo, (kind, name)
+        mapped = getattr(jax, "shard_map", None)
+        if mapped is None:
+            from jax.experimental.shard_map import shard_map as mapped
+        g = jax.jit(mapped(f, mesh=mesh, in_specs=(P("b"),) * 3, out_specs=P("b")))
+        if hasattr(jax, "shard_map") and not name.endswith("grad"):
+            assert "while" in g.lower(*args).as_text(), (kind, name)  # chunks per device
+        for out in (got, g(*args)):
+            # In the row's scale. Shards and chunks compile and round differently (plain or
+            # compensated angles, fusion), and interpolate chains five operations: in
+            # float32 each path is up to 10 ulp from a float64 evaluation, and the gradient
+            # (through ten) 20-26 ulp.
+            scale = np.maximum(1.0, np.max(np.abs(want), axis=-1, keepdims=True))
+            err = np.max(np.abs(np.asarray(out) - want) / scale) / np.finfo(np.float32).eps
+            assert err <= (64 if name.endswith("grad") else 16), (kind, name, err)
+        print(kind, name, "ok", f"{err:.2f}")
+"""
+
+
+def test_chunked_ops_on_a_sharded_batch():
+    """A batch sharded over several CPU devices (jax.sharding, 4 forced host devices, in
+    a subprocess: the device count is fixed at jax's start). ``in_chunks``'s loop slices
+    the batch axis, so it must not run there: with Explicit axes it failed to trace
+    (dynamic_update_slice sharding mismatch) and with Auto axes XLA gathered the whole
+    batch on every device and returned it replicated. The result keeps the input's
+    sharding, the program has no all-gather, values match one device's, and inside
+    ``shard_map`` (each device's own shard) the chunks run again."""
+    code = _SHARDED_SCRIPT
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.count(" ok") >= 4, out.stdout
 
 
 @pytest.mark.parametrize("G", [SO3, SE3], ids=lambda G: G.__name__)
