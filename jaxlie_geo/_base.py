@@ -179,6 +179,31 @@ def components(x: jax.Array) -> Tuple[jax.Array, ...]:
     return tuple(x[..., i] for i in range(x.shape[-1]))
 
 
+def constant(values: Any, like: jax.Array) -> jax.Array:
+    """``values`` (a constant vector or matrix) in ``like``'s dtype, with leading unit axes
+    up to ``like``'s rank, so that combining it with batched arrays needs no implicit rank
+    promotion: users may set ``jax_numpy_rank_promotion="raise"``, under which jaxlie's
+    inverse and compose fail. The same HLO as the implicit broadcast."""
+    c = jnp.asarray(values, like.dtype)
+    return c.reshape((1,) * (like.ndim - c.ndim) + c.shape)
+
+
+def aligned(*xs: Any) -> Tuple[Any, ...]:
+    """Group elements and ``(*batch, k)`` arrays with leading unit axes added so that all
+    have the same number of batch axes: the binary operations broadcast their batch axes
+    numpy-style, and with the rank made equal no implicit rank promotion is left (a
+    reshape, free; nothing is copied)."""
+    params = [x.parameters() if isinstance(x, MatrixLieGroup) else x for x in xs]
+    ndim = max(jnp.ndim(p) for p in params)
+    out = []
+    for x, p in zip(xs, params):
+        if jnp.ndim(p) < ndim:
+            p = jnp.reshape(p, (1,) * (ndim - jnp.ndim(p)) + jnp.shape(p))
+            x = type(x)(p) if isinstance(x, MatrixLieGroup) else p
+        out.append(x)
+    return tuple(out)
+
+
 def matmul(A: jax.Array, B: jax.Array) -> jax.Array:
     """``A @ B`` at full precision. Every matrix product in the library goes through here
     (``jacobians`` writes its small products out as multiply-adds instead): on GPUs a
@@ -950,11 +975,11 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
     # barrier-free kernels on slices of them (see ``SOBase._apply_kernel``).
 
     def apply(self, target: hints.Array) -> jax.Array:
-        T, target = materialize(self, self._check_points(target))
+        T, target = materialize(*aligned(self, self._check_points(target)))
         return T.rotation()._apply_kernel(target) + T.translation()
 
     def multiply(self, other: Self) -> Self:
-        a, b = materialize(self, other)
+        a, b = materialize(*aligned(self, other))
         R = a.rotation()
         return type(self).from_rotation_and_translation(
             R._multiply_kernel(b.rotation()), R._apply_kernel(b.translation()) + a.translation()
@@ -966,7 +991,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         R_a⁻¹t_b and cancels ε·|t_a| (float32 poses 2·10⁴ from the origin, 0.5 apart:
         the residual was off by 1e-3, 10⁴ ulp against mpmath; now ≤ 1.5 ulp). One rotation
         of a point instead of two."""
-        a, b = materialize(self, other)
+        a, b = materialize(*aligned(self, other))
         R_inv = a.rotation().inverse()
         return type(self).from_rotation_and_translation(
             R_inv._multiply_kernel(b.rotation()),

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array, check_batches, pytree_dataclass
+from ._base import MatrixLieGroup, aligned, as_float_array, check_batches, pytree_dataclass
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
 
@@ -34,9 +34,10 @@ class Geodesic(Generic[GroupT]):
         G = type(self.start)
         where = f"{G.__name__} geodesic"
         t = as_float_array(t, "t", (), where, like=self.tangent)
-        check_batches(where, "batch axes of the path and of t", self.tangent.shape[:-1], t.shape)
-        t = t.astype(jnp.result_type(t, self.tangent))
-        return self.start.multiply(G.exp(t[..., None] * self.tangent))
+        batch = check_batches(where, "batch axes of the path and of t", self.tangent.shape[:-1], t.shape)
+        t = jnp.broadcast_to(t.astype(jnp.result_type(t, self.tangent)), batch)
+        t, tangent = aligned(t[..., None], self.tangent)
+        return self.start.multiply(G.exp(t * tangent))
 
 
 def geodesic(start: GroupT, end: GroupT) -> Geodesic[GroupT]:

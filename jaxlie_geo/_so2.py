@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SOBase, as_float_array, pytree_dataclass, resolve_dtype
+from ._base import SOBase, aligned, as_float_array, constant, pytree_dataclass, resolve_dtype
 
 
 @pytree_dataclass
@@ -126,11 +126,13 @@ class SO2(SOBase):
 
     @override
     def apply(self, target: hints.Array) -> jax.Array:
-        return self._apply_kernel(self._check_points(target))
+        R, p = aligned(self, self._check_points(target))
+        return R._apply_kernel(p)
 
     @override
     def multiply(self, other: SO2) -> SO2:
-        return self._multiply_kernel(other)
+        a, b = aligned(self, other)
+        return a._multiply_kernel(b)
 
     # SO2's public operations are its kernels: they read each component twice and have
     # never carried a barrier.
@@ -151,7 +153,7 @@ class SO2(SOBase):
     @override
     def inverse(self) -> SO2:
         p = self.unit_complex
-        return SO2(p * jnp.array([1.0, -1.0], p.dtype))
+        return SO2(p * constant([1.0, -1.0], p))
 
     @override
     def normalize(self) -> SO2:

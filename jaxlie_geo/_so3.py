@@ -6,12 +6,15 @@ from typing import Any, Callable, Optional, Tuple, TypeVar
 
 import jax
 import jax.numpy as jnp
+import numpy as onp
 from typing_extensions import override
 
 from . import _scalar, hints
 from ._base import (
     SOBase,
+    aligned,
     as_float_array,
+    constant,
     materialize,
     pytree_dataclass,
     resolve_dtype,
@@ -205,14 +208,14 @@ def rotate(wxyz: jax.Array, p: jax.Array) -> jax.Array:
 def skew_sq(w: jax.Array) -> jax.Array:
     """ŵ² = w wᵀ − ‖w‖² I, without a matrix product."""
     outer = w[..., :, None] * w[..., None, :]
-    return outer - sq_norm(w)[..., None, None] * jnp.eye(3, dtype=w.dtype)
+    return outer - sq_norm(w)[..., None, None] * constant(onp.eye(3), outer)
 
 
 def jac_right_so3(omega: jax.Array) -> jax.Array:
     """Right Jacobian of SO(3), J_r(ω) = I − F1(θ²) ω̂ + F2(θ²) ω̂² (Solà et al. 2018,
     eq. 143; seed 001's F1, F2): ``(*batch, 3) -> (*batch, 3, 3)``."""
     x = sq_norm(omega)
-    eye = jnp.eye(3, dtype=omega.dtype)
+    eye = constant(onp.eye(3), omega[..., None])
     return (
         eye
         - _scalar.F1(x)[..., None, None] * skew(omega)
@@ -223,7 +226,7 @@ def jac_right_so3(omega: jax.Array) -> jax.Array:
 def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
     """Inverse right Jacobian of SO(3), J_r⁻¹(ω) = I + ½ ω̂ + G(θ²) ω̂²
     (Solà et al. 2018, eq. 144; G from _scalar): ``(*batch, 3) -> (*batch, 3, 3)``."""
-    eye = jnp.eye(3, dtype=omega.dtype)
+    eye = constant(onp.eye(3), omega[..., None])
     return eye + 0.5 * skew(omega) + _scalar.G(sq_norm(omega))[..., None, None] * skew_sq(omega)
 
 
@@ -485,12 +488,12 @@ class SO3(SOBase):
     def apply(self, target: hints.Array) -> jax.Array:
         """Rotate points, shape ``(*batch, 3)``: R(q) p, and for a non-unit q the sandwich
         q p q* = |q|² R(q/|q|) p, as jaxlie (``rotate``). Batch axes broadcast."""
-        R, p = materialize(self, self._check_points(target))
+        R, p = materialize(*aligned(self, self._check_points(target)))
         return R._apply_kernel(p)
 
     @override
     def multiply(self, other: SO3) -> SO3:
-        a, b = materialize(self, other)
+        a, b = materialize(*aligned(self, other))
         return a._multiply_kernel(b)
 
     @override
@@ -504,7 +507,7 @@ class SO3(SOBase):
     @override
     def inverse(self) -> SO3:
         q = self.wxyz
-        return SO3(q * jnp.array([1.0, -1.0, -1.0, -1.0], q.dtype))
+        return SO3(q * constant([1.0, -1.0, -1.0, -1.0], q))
 
     @override
     def normalize(self) -> SO3:

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as onp
 
 from . import hints
-from ._base import MatrixLieGroup, SEBase, as_float_array, check_batches, jit_function
+from ._base import MatrixLieGroup, SEBase, aligned, as_float_array, check_batches, jit_function
 from ._so2 import SO2
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
@@ -178,7 +178,7 @@ def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
 
 def _apply(T: GroupT, points: hints.Array, where: str) -> Tuple[jax.Array, jax.Array]:
     """``apply``'s body; errors about ``points`` name ``where``."""
-    p = T._check_points(points, where, "points")
+    T, p = aligned(T, T._check_points(points, where, "points"))
     R = T.rotation().as_matrix() if isinstance(T, SEBase) else T.as_matrix()
     R = R.astype(jnp.result_type(R, p))
     batch = jnp.broadcast_shapes(R.shape[:-2], p.shape[:-1])

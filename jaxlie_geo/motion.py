@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, as_float_array, check_batches, jit_function, pytree_dataclass
+from ._base import MatrixLieGroup, aligned, as_float_array, check_batches, jit_function, pytree_dataclass
 from ._geodesic import Geodesic
 from ._se2 import SE2
 
@@ -53,7 +53,8 @@ def velocity_between(start: GroupT, end: GroupT, duration: hints.Scalar) -> jax.
     tangent = start._between(end).log()
     check_batches("velocity_between", "batch axes of the poses and `duration`",
                   tangent.shape[:-1], duration.shape)
-    return tangent / duration[..., None].astype(tangent.dtype)
+    tangent, duration = aligned(tangent, duration[..., None].astype(tangent.dtype))
+    return tangent / duration
 
 
 @jit_function()

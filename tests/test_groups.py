@@ -995,6 +995,83 @@ def test_dtype_in_equals_dtype_out(G, name, dtype):
 
 
 # ---------------------------------------------------------------------------------
+# jax_numpy_rank_promotion="raise": users who set it (to catch accidental broadcasting in
+# their own code) must not see it fire inside ours, whose batch axes broadcast by design.
+
+
+def _module_calls(G):
+    """The module functions (jacobians, uncertainty, manifold, motion) and derivatives,
+    as functions of the context dict of ``_public_calls``."""
+    from jaxlie_geo import jacobians, manifold, motion, uncertainty
+
+    k = G.tangent_dim
+    cov = np.eye(k) * 0.01
+    calls = {
+        "jacobians.compose": lambda c: jacobians.compose(c["T"], c["U"]),
+        "jacobians.inverse": lambda c: jacobians.inverse(c["T"]),
+        "jacobians.between": lambda c: jacobians.between(c["T"], c["U"]),
+        "jacobians.rminus": lambda c: jacobians.rminus(c["T"], c["U"]),
+        "jacobians.rplus": lambda c: jacobians.rplus(c["T"], c["x"]),
+        "jacobians.apply": lambda c: jacobians.apply(c["T"], c["p"]),
+        "jacobians.exp": lambda c: jacobians.exp(G, c["x"]),
+        "jacobians.log": lambda c: jacobians.log(c["T"]),
+        "propagate_compose": lambda c: uncertainty.propagate_compose(
+            c["T"], cov.astype(c["dtype"]), c["U"], cov.astype(c["dtype"])),
+        "propagate_inverse": lambda c: uncertainty.propagate_inverse(c["T"], cov.astype(c["dtype"])),
+        "propagate_apply": lambda c: uncertainty.propagate_apply(
+            c["T"], cov.astype(c["dtype"]), c["p"]),
+        "sample": lambda c: uncertainty.sample(key_of(3), c["T"], cov.astype(c["dtype"])),
+        "mean": lambda c: uncertainty.mean(c["U"]),
+        "rplus": lambda c: manifold.rplus(c["T"], c["x"]),
+        "rminus": lambda c: manifold.rminus(c["T"], c["U"]),
+        "rplus_jacobian": lambda c: manifold.rplus_jacobian_parameters_wrt_delta(c["T"]),
+        "velocity_between": lambda c: motion.velocity_between(c["T"], c["U"], c["t"] + 1.0),
+        "pose_at": lambda c: motion.pose_at(c["T"], c["x"], c["t"]),
+        "grad": lambda c: jax.grad(
+            lambda x: jnp.sum(G.exp(x).interpolate(c["U"], c["t"]).log() ** 2))(c["x"]),
+        "jacfwd": lambda c: jax.jacfwd(lambda x: (c["T"] @ G.exp(x)).log())(c["x"].reshape(-1, k)[0]),
+        "hessian": lambda c: jax.hessian(lambda x: jnp.sum(G.exp(x).log() ** 2))(c["x"][0]),
+    }
+    if G is SE2:
+        calls["arc"] = lambda c: motion.arc(c["T"], c["x"])
+    return calls
+
+
+@pytest.mark.parametrize("layout", ["same", "T_higher", "U_higher"])
+@over_groups
+def test_rank_promotion_raise(G, layout):
+    """Every public function and module function, values and derivatives, under
+    ``jax.numpy_rank_promotion("raise")`` gives what it gives with implicit rank promotion
+    allowed, bit for bit, with operands of equal batch shapes and with batch axes of
+    different ranks (T batch (2, 3) against U, points and times of batch (3,), and the
+    reverse). jaxlie fails this for compose and inverse; our group inverses, SO3/SE2
+    Jacobians, binary operations, geodesics and motion failed too."""
+    dtype = np.float32
+    hi, lo = (2, 3), (3,)
+    bT, bU = {"same": (lo, lo), "T_higher": (hi, lo), "U_higher": (lo, hi)}[layout]
+    ctx = {
+        "dtype": dtype,
+        "T": random_element(G, 7, bT, dtype),
+        "U": random_element(G, 8, bU, dtype),
+        "x": random_tangent(G, 7, bT, dtype),
+        "p": np.ones(bU + (G.space_dim,), dtype),
+        "t": np.asarray([0.25, 0.75, 1.5], dtype),
+        "theta": np.asarray([0.1, -0.4, 2.0], dtype),
+    }
+    calls = {**_public_calls(G), **_module_calls(G)}
+    if layout != "same":  # these need equal batch shapes, or a batch of 3 elements
+        for name in ("stack", "reshape"):
+            del calls[name]
+    for name, call in calls.items():
+        with jax.numpy_rank_promotion("allow"):
+            want = call(ctx)
+        with jax.numpy_rank_promotion("raise"):
+            got = call(ctx)
+        for g, w in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
+            np.testing.assert_array_equal(np.asarray(g), np.asarray(w), err_msg=name)
+
+
+# ---------------------------------------------------------------------------------
 # Integer inputs are promoted to float.
 
 
