@@ -192,7 +192,9 @@ def aligned(*xs: Any) -> Tuple[Any, ...]:
     """Group elements and ``(*batch, k)`` arrays with leading unit axes added so that all
     have the same number of batch axes: the binary operations broadcast their batch axes
     numpy-style, and with the rank made equal no implicit rank promotion is left (a
-    reshape, free; nothing is copied)."""
+    reshape, free; nothing is copied). Unlike ``utils.broadcast_leading_axes`` it does not
+    broadcast to the full batch: ``materialize`` would then write a whole-batch copy of a
+    single element composed with a batch."""
     params = [x.parameters() if isinstance(x, MatrixLieGroup) else x for x in xs]
     ndim = max(jnp.ndim(p) for p in params)
     out = []
