@@ -136,6 +136,55 @@ def _sample(
     return mean.multiply(G.exp(matmul(L, z[..., None])[..., 0]))
 
 
+def _mean_residual(mu: MatrixLieGroup, poses: MatrixLieGroup, w: jax.Array) -> jax.Array:
+    """Σ wᵢ log(μ⁻¹ xᵢ) over the first batch axis of ``poses``: the update of ``mean``'s
+    iteration, zero at the mean. ``w`` has shape ``(N,)``, ``μ`` batch ``rest``."""
+    r = mu[None]._between(poses).log()  # (N, *rest, k)
+    w = w.reshape(w.shape + (1,) * (r.ndim - 1))
+    return jnp.sum(w * r, axis=0)
+
+
+@jax.custom_jvp
+def _mean_offset(base: MatrixLieGroup, poses: MatrixLieGroup, w: jax.Array) -> jax.Array:
+    """δ*(poses, w), the root of δ ↦ _mean_residual(base ⊕ δ, poses, w), given that
+    ``base`` is the root (δ* = 0 in value). Its derivatives are the implicit function
+    theorem's, δ̇* = −(∂F/∂δ)⁻¹ ∂F/∂(poses, w)·(ẋ, ẇ) at δ*, to every order: the rule calls
+    this function again. ``base`` is held constant (its tangent is ignored)."""
+    return jnp.zeros((*base.get_batch_axes(), base.tangent_dim), w.dtype)
+
+
+@_mean_offset.defjvp
+def _mean_offset_jvp(primals: Any, tangents: Any) -> Tuple[jax.Array, jax.Array]:
+    base, poses, w = primals
+    _, poses_dot, w_dot = tangents
+    G = type(base)
+    delta = _mean_offset(base, poses, w)
+    mu = base.multiply(G.exp(delta))
+    # ∂F/∂(poses, w) along the tangents, at δ*
+    rhs = jax.jvp(lambda x, ww: _mean_residual(mu, x, ww), (poses, w), (poses_dot, w_dot))[1]
+    # ∂F/∂δ in closed form: exp(−δ − ε) = exp(−J_r(δ) ε) exp(−δ) to first order, and
+    # log(exp(−η) Z) = log Z − J_l⁻¹(log Z) η, so ∂F/∂δ = −Σ wᵢ J_l⁻¹(sᵢ) J_r(δ) with
+    # sᵢ = log(μ⁻¹ xᵢ), μ = base ⊕ δ (first-order BCH, as in Solà et al. 2018). At the
+    # root, J_r⁻¹ in place of J_l⁻¹ gives the same matrix: they differ by ad(sᵢ), and
+    # Σ wᵢ ad(sᵢ) = ad(F) = 0.
+    s = mu[None]._between(poses).log()
+    wj = w.reshape(w.shape + (1,) * s.ndim)
+    A = -matmul(jnp.sum(wj * G.jac_left_inv(s), axis=0), G.jac_right(delta))
+    return delta, -jnp.linalg.solve(A, rhs[..., None])[..., 0]
+
+
+@jax.custom_jvp
+def _retract_zero(base: GroupT, delta: jax.Array) -> GroupT:
+    """``base ⊕ delta`` for a ``delta`` that is zero in value: ``base`` itself, with the
+    derivatives of ``base @ exp(delta)``."""
+    return base
+
+
+@_retract_zero.defjvp
+def _retract_zero_jvp(primals: Any, tangents: Any) -> Tuple[Any, Any]:
+    return jax.jvp(lambda b, d: b.multiply(type(b).exp(d)), primals, tangents)
+
+
 @jit_function("tol", "max_iters")
 def mean(
     poses: GroupT,
@@ -161,9 +210,16 @@ def mean(
         max_iters: cap on the iterations (jit-able ``lax.while_loop``).
     Returns:
         The mean, batch ``rest``. Meaningful when the poses lie within a ball where
-        ``log`` is unique (rotations less than π apart). Forward-mode derivatives
-        (``jax.jvp``, ``jax.jacfwd``) pass through the iteration; reverse mode
-        (``jax.grad``) does not, as for any ``lax.while_loop``.
+        ``log`` is unique (rotations less than π apart).
+
+    Derivatives with respect to ``poses`` and ``weights`` (``jax.grad``, ``jacfwd``,
+    ``jacrev``, ``hessian``) are those of the exact mean, by the implicit function theorem
+    at the returned point, not the derivative of the iterations: with F(μ) = Σ wᵢ
+    log(μ⁻¹ xᵢ) = 0, ``μ̇ = μ ⊕ δ̇``, ``δ̇ = −(∂F/∂δ)⁻¹ ∂F/∂(x, w)·(ẋ, ẇ)``, ∂F/∂δ =
+    −Σ wᵢ J_l⁻¹(log(μ⁻¹ xᵢ)) in closed form, one k×k solve per mean. They cost one
+    linearisation of F, not of the loop, and are exact only as far as the iteration
+    converged (not after ``max_iters`` stopped it early). ``init``, ``tol`` and
+    ``max_iters`` get no derivative.
     """
     G = type(poses)
     n = poses.get_batch_axes()[0] if poses.get_batch_axes() else None
@@ -193,11 +249,11 @@ def mean(
                 f"rest {rest}."
             )
         mu0 = G(jnp.broadcast_to(init.parameters().astype(dtype), (*rest, G.parameters_dim)))
-    extra = (1,) * (poses.parameters().ndim - 2)
+    # The loop is not differentiated (see the end): its inputs carry no tangents.
+    fixed_poses, fixed_w = jax.lax.stop_gradient((poses, w))
 
     def step(mu: GroupT) -> Tuple[GroupT, jax.Array]:
-        r = mu[None]._between(poses).log()  # (N, *rest, k)
-        delta = jnp.sum(w.reshape((n, *extra, 1)) * r, axis=0)
+        delta = _mean_residual(mu, fixed_poses, fixed_w)
         # NaN updates are left out of the stopping test (a NaN compares false, and one
         # element's NaN would otherwise stop every other element after one step).
         size = jnp.where(jnp.isnan(delta), 0.0, jnp.abs(delta))
@@ -213,9 +269,12 @@ def mean(
         return mu, size, i + 1
 
     mu, _, _ = jax.lax.while_loop(
-        cond, body, (mu0, jnp.asarray(jnp.inf, dtype), jnp.asarray(0))
+        cond, body, (jax.lax.stop_gradient(mu0), jnp.asarray(jnp.inf, dtype), jnp.asarray(0))
     )
-    return mu
+    # Derivatives by the implicit function theorem, not through the loop: near the root
+    # the mean is μ ⊕ δ*(poses, w), μ the loop's result held constant and δ* the root of
+    # δ ↦ Σ wᵢ log((μ ⊕ δ)⁻¹ xᵢ). δ* is 0 in value, so the value is the loop's, bit for bit.
+    return _retract_zero(mu, _mean_offset(mu, poses, w))
 
 
 __all__ = ["propagate_compose", "propagate_inverse", "propagate_apply", "sample", "mean"]

@@ -1022,6 +1022,8 @@ def _module_calls(G):
             c["T"], cov.astype(c["dtype"]), c["p"]),
         "sample": lambda c: uncertainty.sample(key_of(3), c["T"], cov.astype(c["dtype"])),
         "mean": lambda c: uncertainty.mean(c["U"]),
+        "mean_grad": lambda c: jax.grad(
+            lambda x: jnp.sum(uncertainty.mean(G.exp(x)).log() ** 2))(c["x"]),
         "rplus": lambda c: manifold.rplus(c["T"], c["x"]),
         "rminus": lambda c: manifold.rminus(c["T"], c["U"]),
         "rplus_jacobian": lambda c: manifold.rplus_jacobian_parameters_wrt_delta(c["T"]),
