@@ -144,9 +144,10 @@ def arc(start: SE2, velocity: hints.Array) -> Arc:
     speed = jnp.where(moving, safe_speed, 0.0)
     safe_omega = jnp.where(turning, omega, 1.0)
     safe_u = jnp.where(moving[..., None], u, jnp.ones_like(u))
-    curvature = jnp.where(
-        moving, omega / safe_speed, jnp.where(turning, jnp.sign(omega) * jnp.inf, 0.0)
-    )
+    # ±inf by a select, not sign(ω)·inf: 0·inf would make a NaN (discarded, but caught by
+    # jax_debug_nans without jit) wherever ω = 0.
+    spin = jnp.where(omega > 0, jnp.inf, -jnp.inf)
+    curvature = jnp.where(moving, omega / safe_speed, jnp.where(turning, spin, 0.0))
     Ju = jnp.stack([-u[..., 1], u[..., 0]], axis=-1)
     centre = jnp.where(turning[..., None], p0 + Ju / safe_omega[..., None], p0)
     heading = jnp.where(moving, jnp.arctan2(safe_u[..., 1], safe_u[..., 0]), 0.0)

@@ -1088,6 +1088,38 @@ def test_rank_promotion_raise(G, higher):
                 np.testing.assert_array_equal(np.asarray(g), np.asarray(w), err_msg=name)
 
 
+@over_groups
+def test_debug_nans_without_jit(G):
+    """Under ``jax_debug_nans`` with jit disabled, JAX checks every primitive's output, even
+    values a select discards: no public or module function, value or derivative, may make
+    a NaN from valid input at the delicate tangents (0, 1e-12, exactly π, pure
+    translations). ``normalize`` (a NaN constant for direction-less input) and
+    ``motion.arc`` (sign(ω)·inf at ω = 0) raised FloatingPointError for every valid pose.
+    Input without a direction still gives NaN, and the alarm then is right."""
+    dtype = np.float64
+    x = special_tangents(G, dtype)[:6]
+    n = x.shape[0]
+    ctx = {
+        "dtype": dtype, "T": G.exp(x), "U": G.exp(x[::-1].copy()), "x": x,
+        "p": np.zeros((n, G.space_dim), dtype), "t": np.linspace(0.0, 1.0, n).astype(dtype),
+        "theta": np.asarray([0.0, 1e-12, np.pi, -np.pi, 1.0, 2.0], dtype),
+    }
+    calls = {**_public_calls(G), **_module_calls(G)}
+    del calls["reshape"]  # needs 3 elements
+    with jax.disable_jit(), jax.debug_nans(True):
+        for name, call in calls.items():
+            try:
+                call(ctx)
+            except FloatingPointError as e:
+                raise AssertionError(f"{G.__name__}.{name}: {str(e).splitlines()[0]}") from None
+        bad = G(jnp.zeros(G.parameters_dim, dtype))
+        with pytest.raises(FloatingPointError):
+            bad.normalize()
+    out = bad.normalize()
+    rot = out.rotation() if is_se(G) else out
+    assert np.all(np.isnan(to_np(rot.parameters()))), out
+
+
 # ---------------------------------------------------------------------------------
 # Integer inputs are promoted to float.
 
