@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as onp
 
 from . import hints
-from ._base import MatrixLieGroup, SEBase, aligned, as_float_array, check_batches, jit_function
+from ._base import MatrixLieGroup, SEBase, aligned, as_float_array, check_batches, constant, jit_function
 from ._so2 import SO2
 
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
@@ -168,6 +168,10 @@ def generator_action(G: Type[MatrixLieGroup], points: hints.Array) -> jax.Array:
     )
 
 
+_E0, _E1 = onp.array([[1.0], [0.0]]), onp.array([[0.0], [1.0]])
+"""The columns e₀, e₁ as ``(2, 1)`` constants (SO(2)'s ``apply`` Jacobian)."""
+
+
 @jit_function()
 def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``T @ p`` w.r.t. ``T`` (right perturbation) and ``p``:
@@ -185,10 +189,16 @@ def _apply(T: GroupT, points: hints.Array, where: str) -> Tuple[jax.Array, jax.A
     R = jnp.broadcast_to(R, (*batch, *R.shape[-2:]))
     if isinstance(T, SO2):
         # R K(p) = R J p = J R p (plane rotations commute with J = hat(1)): one rotation of
-        # p, read from (c, s), not from R. benchmarks/jacobians.py, 10^5 elements, float32,
-        # 2-core VM: ratio to jacfwd 0.90 → 1.05–1.18; both sides are at the memory floor.
-        q = jnp.broadcast_to(T._apply_kernel(p.astype(R.dtype)), (*batch, 2))
-        return jnp.stack([-q[..., 1], q[..., 0]], -1)[..., None], R
+        # p, read from (c, s), not from R, and written as a·e₀ + b·e₁ (scalars broadcast
+        # onto constant columns) rather than a stack, which XLA:CPU writes more slowly.
+        # benchmarks/jacobians.py, 10^5 elements, float32, 2-core VM, ratio to jacfwd: a
+        # stack from R 0.90, from (c, s) 1.05–1.18, this form 1.4. Writing R alone, or the
+        # column alone, already takes 0.3–0.5 of jacfwd's time each (RESULTS.md).
+        c, s = T.unit_complex[..., 0, None, None], T.unit_complex[..., 1, None, None]
+        pp = p.astype(R.dtype)
+        x, y = pp[..., 0, None, None], pp[..., 1, None, None]
+        col = -(s * x + c * y) * constant(_E0, x) + (c * x - s * y) * constant(_E1, x)
+        return jnp.broadcast_to(col, (*batch, 2, 1)), R
     K = generator_action(type(T), jnp.broadcast_to(p.astype(R.dtype), (*batch, p.shape[-1])))
     return _matmul(R, K), R
 
