@@ -192,8 +192,8 @@ def _apply(T: GroupT, points: hints.Array, where: str) -> Tuple[jax.Array, jax.A
         # p, read from (c, s), not from R, and written as a·e₀ + b·e₁ (scalars broadcast
         # onto constant columns) rather than a stack, which XLA:CPU writes more slowly.
         # benchmarks/jacobians.py, 10^5 elements, float32, 2-core VM, ratio to jacfwd: a
-        # stack from R 0.90, from (c, s) 1.05–1.18, this form 1.4. Writing R alone, or the
-        # column alone, already takes 0.3–0.5 of jacfwd's time each (RESULTS.md).
+        # stack from R 0.90, from (c, s) 1.05–1.18, this form 1.55–2.06. Writing R alone
+        # takes 0.4–0.55 of jacfwd's time, the column alone 0.3 (RESULTS.md).
         c, s = T.unit_complex[..., 0, None, None], T.unit_complex[..., 1, None, None]
         pp = p.astype(R.dtype)
         x, y = pp[..., 0, None, None], pp[..., 1, None, None]
