@@ -884,6 +884,11 @@ class SOBase(MatrixLieGroup):
         """``multiply`` with no ``materialize``."""
         return self.multiply(other)
 
+    def _matrix_block(self) -> jax.Array:
+        """``as_matrix`` in the form that fuses best into a larger matrix (an SE group's
+        homogeneous matrix or Jacobians); SO2 overrides it."""
+        return self.as_matrix()
+
 
 ContainedSOType = TypeVar("ContainedSOType", bound=SOBase)
 
@@ -1013,7 +1018,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         )
 
     def as_matrix(self) -> jax.Array:
-        R = self.rotation().as_matrix()
+        R = self.rotation()._matrix_block()
         t = self.translation()
         n = self.space_dim
         batch = jnp.broadcast_shapes(R.shape[:-2], t.shape[:-1])
@@ -1051,7 +1056,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         # t' = t + R δ_trans (the V matrix is I + O(δ)).
         R = self.rotation()
         Jq = R._rplus_jacobian()  # (*batch, k_rot_params, k_rot_tangent)
-        Rm = R.as_matrix()
+        Rm = R._matrix_block()
         batch = Rm.shape[:-2]
         n, kq = self.space_dim, Jq.shape[-2]
         top = jnp.concatenate(

@@ -121,6 +121,19 @@ class SO2(SOBase):
 
     @override
     def as_matrix(self) -> jax.Array:
+        # Row 0 is (c, −s) = u·(1, −1), row 1 is (s, c) = u reversed: one select between
+        # two broadcast rows. XLA:CPU writes it in 0.5 ns/element at 10^5 (float32, 2-core
+        # VM), against 0.9 for a stack of stacks, whose nested concatenates pick among
+        # four sources per element (RESULTS.md, seventeenth session).
+        u = self.unit_complex
+        top = (u * constant([1.0, -1.0], u))[..., None, :]
+        row = jax.lax.broadcasted_iota(jnp.int32, (*u.shape[:-1], 2, 2), u.ndim - 1)
+        return jnp.where(row == 0, top, u[..., None, ::-1])
+
+    @override
+    def _matrix_block(self) -> jax.Array:
+        # Inside SE2's matrices a stack fuses better than the select: SE2.as_matrix took
+        # 0.70–0.91x the time with the select (10^3–10^6, float32).
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
         return jnp.stack([jnp.stack([c, -s], -1), jnp.stack([s, c], -1)], -2)
 

@@ -183,7 +183,7 @@ def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
 def _apply(T: GroupT, points: hints.Array, where: str) -> Tuple[jax.Array, jax.Array]:
     """``apply``'s body; errors about ``points`` name ``where``."""
     T, p = aligned(T, T._check_points(points, where, "points"))
-    R = T.rotation().as_matrix() if isinstance(T, SEBase) else T.as_matrix()
+    R = T.rotation()._matrix_block() if isinstance(T, SEBase) else T.as_matrix()
     R = R.astype(jnp.result_type(R, p))
     batch = jnp.broadcast_shapes(R.shape[:-2], p.shape[:-1])
     R = jnp.broadcast_to(R, (*batch, *R.shape[-2:]))
@@ -192,8 +192,8 @@ def _apply(T: GroupT, points: hints.Array, where: str) -> Tuple[jax.Array, jax.A
         # p, read from (c, s), not from R, and written as a·e₀ + b·e₁ (scalars broadcast
         # onto constant columns) rather than a stack, which XLA:CPU writes more slowly.
         # benchmarks/jacobians.py, 10^5 elements, float32, 2-core VM, ratio to jacfwd: a
-        # stack from R 0.90, from (c, s) 1.05–1.18, this form 1.55–2.06. Writing R alone
-        # takes 0.4–0.55 of jacfwd's time, the column alone 0.3 (RESULTS.md).
+        # stack from R 0.90, from (c, s) 1.05–1.18, this form 1.55–2.06 with R stacked and
+        # 1.99–3.04 with SO2.as_matrix's select (RESULTS.md).
         c, s = T.unit_complex[..., 0, None, None], T.unit_complex[..., 1, None, None]
         pp = p.astype(R.dtype)
         x, y = pp[..., 0, None, None], pp[..., 1, None, None]
