@@ -134,7 +134,9 @@ def main() -> int:
             sdist = glob.glob(os.path.join(tmp, "jaxlie-*.tar.gz"))[0]
         with tarfile.open(sdist) as tar:
             members = [m for m in tar.getmembers() if "/tests/" in m.name and m.isfile()]
-            tar.extractall(tmp, members=members, filter="data")
+            # the "data" filter (Python >= 3.10.12 / 3.11.4) refuses links and absolute paths
+            safe = {"filter": "data"} if hasattr(tarfile, "data_filter") else {}
+            tar.extractall(tmp, members=members, **safe)
         tests = glob.glob(os.path.join(tmp, "*", "tests"))[0]
         print(f"{os.path.basename(sdist)}: {len(members)} test files, target {args.target}")
         with open(os.path.join(tests, "utils.py"), "w") as f:
