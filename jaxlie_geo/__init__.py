@@ -4,6 +4,9 @@ A drop-in superset of jaxlie 1.5 (``import jaxlie_geo as jaxlie``) with exact nu
 closed-form vector kernels, ``hat``/``vee``, geodesics and batch indexing.
 """
 
+from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
+from importlib.metadata import version as _version
+
 from . import hints as hints
 from . import interop as interop
 from . import jacobians as jacobians
@@ -14,7 +17,7 @@ from . import utils as utils
 from ._base import MatrixLieGroup as MatrixLieGroup
 from ._base import SEBase as SEBase
 from ._base import SOBase as SOBase
-from ._batch import stack as stack
+from ._base import stack as stack
 from ._geodesic import Geodesic as Geodesic
 from ._geodesic import between as between
 from ._geodesic import geodesic as geodesic
@@ -23,4 +26,28 @@ from ._se3 import SE3 as SE3
 from ._so2 import SO2 as SO2
 from ._so3 import SO3 as SO3
 
-__version__ = "0.1.0"
+try:
+    __version__ = _version("jaxlie_geo")
+except _PackageNotFoundError:  # imported from a source tree that was never installed
+    __version__ = "0.0.0+unknown"
+
+__all__ = [
+    "MatrixLieGroup",
+    "SOBase",
+    "SEBase",
+    "SO2",
+    "SE2",
+    "SO3",
+    "SE3",
+    "Geodesic",
+    "geodesic",
+    "between",
+    "stack",
+    "hints",
+    "interop",
+    "jacobians",
+    "manifold",
+    "motion",
+    "uncertainty",
+    "utils",
+]

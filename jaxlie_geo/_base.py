@@ -1,35 +1,31 @@
-"""Abstract bases: what every matrix Lie group, and every semidirect product, does once.
+"""The interface of a matrix Lie group, and what every group and every semidirect product
+does once.
 
 Conventions used throughout the package:
 
 * Elements are frozen dataclasses with a single array field holding the parameters,
   shape ``(*batch, parameters_dim)``; leading batch axes broadcast numpy-style between
   operands.
-* Perturbations are on the right: ``T ⊕ δ = T @ exp(δ)`` (jaxlie's and Solà et al.'s
-  "right" convention); ``adjoint`` moves tangents across: ``T @ exp(δ) = exp(Ad(T) δ) @ T``.
-* Tangent orderings follow jaxlie: SE(2) ``(vx, vy, θ)``, SE(3) ``(v, ω)``. Eberly
-  (seed 001 §10) orders SE(3) rotation-first; the formulas here are adapted.
+* Perturbations are on the right: ``T ⊕ δ = T @ exp(δ)`` (jaxlie's convention, and Solà,
+  Deray and Atchuthan, *A micro Lie theory for state estimation in robotics* (2018), §III);
+  ``adjoint`` moves tangents across: ``T @ exp(δ) = exp(Ad(T) δ) @ T``.
+* Tangent orderings follow jaxlie: SE(2) ``(vx, vy, θ)``, SE(3) ``(v, ω)``. Eberly, *Lie
+  Groups and Lie Algebras* (2024), §10, orders SE(3) rotation-first; the formulas here are
+  adapted.
 * Constructors never validate (JAX rebuilds pytrees with non-array leaves); factories and
   operations do, at trace time, raising ``ValueError`` that names the expected and the
-  received shape.
+  received shape (``_checks``).
 """
 
 from __future__ import annotations
 
 import abc
 import dataclasses
-import functools
-import importlib
 import inspect
-import math
-import re
 from typing import (
-    TYPE_CHECKING,
     Any,
-    Callable,
     ClassVar,
     Generic,
-    Iterable,
     Iterator,
     Optional,
     Sequence,
@@ -44,466 +40,22 @@ from typing import (
 import jax
 import jax.numpy as jnp
 import numpy as onp
-from typing_extensions import Self, dataclass_transform, final
+from typing_extensions import Self, final
 
 from . import hints
-
-if TYPE_CHECKING:
-    from ._geodesic import Geodesic
-
-
-# ---------------------------------------------------------------------------------
-# Input checking, shared by every factory and operation.
-
-
-def _default_float() -> jnp.dtype:
-    """The default float dtype: float64 when ``jax_enable_x64`` is on, else float32."""
-    return jnp.zeros(()).dtype
-
-
-def as_float_array(
-    x: Any, name: str, trailing: Tuple[int, ...], where: str, like: Any = None
-) -> jax.Array:
-    """Convert ``x`` to a floating JAX array and check its trailing shape.
-
-    Integer and boolean inputs are promoted to ``like``'s dtype when given (the element
-    they are combined with: int ⊕ float32 → float32, as JAX promotes), else to the default
-    float dtype; floating inputs keep their dtype. Raises ``ValueError`` naming ``where``,
-    ``name``, the expected trailing shape and the received shape.
-    """
-    x = jnp.asarray(x)
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        if jnp.issubdtype(x.dtype, jnp.complexfloating):
-            raise ValueError(f"{where}: `{name}` must be real, got dtype {x.dtype}.")
-        x = x.astype(_default_float() if like is None else jnp.asarray(like).dtype)
-    k = len(trailing)
-    if x.ndim < k or tuple(x.shape[x.ndim - k :]) != tuple(trailing):
-        expected = "(*batch, " + ", ".join(map(str, trailing)) + ")" if k else "(*batch,)"
-        raise ValueError(
-            f"{where}: `{name}` must have shape {expected}, got shape {tuple(x.shape)}."
-        )
-    return x
-
-
-def resolve_dtype(dtype: Any) -> jnp.dtype:
-    """``None`` -> default float dtype; anything else must be a floating dtype."""
-    if dtype is None:
-        return _default_float()
-    dtype = jnp.dtype(dtype)
-    if not jnp.issubdtype(dtype, jnp.floating):
-        raise ValueError(f"dtype must be a floating dtype, got {dtype}.")
-    return jax.dtypes.canonicalize_dtype(dtype)
-
-
-def static_size(shape: Sequence[Any]) -> Optional[int]:
-    """The number of elements of ``shape``, or None when a dimension is symbolic
-    (``jax.export`` shape polymorphism), where size-dependent choices take their default."""
-    if all(isinstance(d, (int, onp.integer)) for d in shape):
-        return math.prod(shape)
-    return None
-
-
-def materialize(*xs: Any) -> Any:
-    """Have XLA compute each input once, into memory, before a kernel that reads its
-    components several times (a Hamilton product reads each of 8 components 4 times).
-
-    Without it XLA:CPU fuses an expensive producer (exp's sincos, log's atan polynomial)
-    into every consumer that reads it and recomputes it per read. Measured at 10^6 SE3
-    elements (float32, 2 cores): ``a @ SE3.exp(x)`` 196 → 73 ns/element (the exp alone: 63),
-    ``(a.inverse() @ b).log()`` 122 → 74, ``a.interpolate(b, t)`` 290 → 159 (186 → 96 in
-    ``benchmarks/run.py``). On a whole input already in memory (a function argument) the
-    barrier is free; on a *slice* of one, jax ≥ 0.11 copies the slice (hence the
-    barrier-free ``SOBase`` kernels that the SE groups call). Transparent to jit, vmap
-    and autodiff.
-
-    With jax ≥ 0.11 the tangents pass through without a barrier (``_barrier``): JAX's own
-    rule puts them behind a second barrier, and jax 0.11.2 fails to transpose that one
-    inside a ``custom_jvp`` rule (``_batch.in_chunks``): the gradient of a 2^19-element
-    ``interpolate`` raised "DynamicJaxprTracer has no attribute accum", on CPU and GPU. On
-    jax 0.10 the barrier stays on the tangents: without it XLA recomputes tangent producers
-    per consumer, and ``jax.jacfwd`` of an SE3 compose took 6.4x longer (13.0 against 2.0
-    µs per element at 10^5, 2-core VM).
-    """
-    out = _barrier(xs) if _TANGENTS_PASS_THROUGH else jax.lax.optimization_barrier(xs)
-    return out[0] if len(xs) == 1 else out
-
-
-def _version(text: str) -> Tuple[int, ...]:
-    """The leading numeric components of a version string, then −1 for a pre-release
-    (a, b, rc, dev), which precedes the release: "0.12.0.1" -> (0, 12, 0, 1), "0.6.0rc1" ->
-    (0, 6, 0, -1), "0.7.0.dev20250601" -> (0, 7, 0, -1), "0.5.3+cuda12" -> (0, 5, 3). Compare
-    with ``_at_least``."""
-    out = []
-    for part in text.split("."):
-        digits = re.match(r"\d*", part).group()  # type: ignore[union-attr]  # \d* always matches
-        if digits:
-            out.append(int(digits))
-        if digits != part:
-            if re.match(r"[-_]?(a|b|c|rc|alpha|beta|pre|preview|dev)\d*$", part[len(digits):], re.I):
-                out.append(-1)
-            break
-    return tuple(out)
-
-
-def _at_least(text: str, minimum: Tuple[int, ...]) -> bool:
-    """Whether version ``text`` is ``minimum`` or later (missing components count as 0)."""
-    have = _version(text)
-    width = max(len(have), len(minimum))
-    pad = lambda v: v + (0,) * (width - len(v))  # noqa: E731
-    return pad(have) >= pad(minimum)
-
-
-# jax 0.5.3 is the first release with JVP and transpose rules for optimization_barrier
-# (0.4.38 the first with its batching rule); older ones fail on the first grad or vmap.
-if not _at_least(jax.__version__, (0, 5, 3)):
-    raise ImportError(
-        f"jaxlie_geo needs jax >= 0.5.3 (the first release that differentiates "
-        f"lax.optimization_barrier); found jax {jax.__version__}."
-    )
-_TANGENTS_PASS_THROUGH = _at_least(jax.__version__, (0, 11))
-
-
-@jax.custom_jvp
-def _barrier(xs: Any) -> Any:
-    """``optimization_barrier`` on the primal values only (see ``materialize``)."""
-    return jax.lax.optimization_barrier(xs)
-
-
-@_barrier.defjvp
-def _barrier_jvp(primals: Any, tangents: Any) -> Any:
-    return _barrier(primals[0]), tangents[0]
-
-
-def components(x: jax.Array) -> Tuple[jax.Array, ...]:
-    """Split the last axis into a tuple of arrays of shape ``x.shape[:-1]``."""
-    return tuple(x[..., i] for i in range(x.shape[-1]))
-
-
-def constant(values: Any, like: jax.Array) -> jax.Array:
-    """``values`` (a constant vector or matrix) in ``like``'s dtype, with leading unit axes
-    up to ``like``'s rank, so that combining it with batched arrays needs no implicit rank
-    promotion: users may set ``jax_numpy_rank_promotion="raise"``, under which jaxlie's
-    inverse and compose fail. The same HLO as the implicit broadcast."""
-    c = jnp.asarray(values, like.dtype)
-    return c.reshape((1,) * (like.ndim - c.ndim) + c.shape)
-
-
-def aligned(*xs: Any) -> Tuple[Any, ...]:
-    """Group elements and ``(*batch, k)`` arrays with leading unit axes added so that all
-    have the same number of batch axes: the binary operations broadcast their batch axes
-    numpy-style, and with the rank made equal no implicit rank promotion is left (a
-    reshape, free; nothing is copied). Unlike ``utils.broadcast_leading_axes`` it does not
-    broadcast to the full batch: ``materialize`` would then write a whole-batch copy of a
-    single element composed with a batch."""
-    params = [x.parameters() if isinstance(x, MatrixLieGroup) else x for x in xs]
-    ndim = max(jnp.ndim(p) for p in params)
-    out = []
-    for x, p in zip(xs, params):
-        if jnp.ndim(p) < ndim:
-            p = jnp.reshape(p, (1,) * (ndim - jnp.ndim(p)) + jnp.shape(p))
-            x = type(x)(p) if isinstance(x, MatrixLieGroup) else p
-        out.append(x)
-    return tuple(out)
-
-
-def matmul(A: jax.Array, B: jax.Array) -> jax.Array:
-    """``A @ B`` at full precision. Every matrix product in the library goes through here
-    (``jacobians`` writes its small products out as multiply-adds instead): on GPUs a
-    float32 ``@`` at JAX's default precision runs in TF32, about 1e-3 relative error on an
-    H100, where SE3 ``propagate_compose`` lost its symmetry at that level. On CPU the
-    precision setting changes nothing."""
-    return jnp.matmul(A, B, precision=jax.lax.Precision.HIGHEST)
-
-
-# ---------------------------------------------------------------------------------
-# Pytree registration.
-
-_C = TypeVar("_C", bound=type)
-
-
-@dataclass_transform(frozen_default=True, eq_default=False)
-def pytree_dataclass(cls: _C) -> _C:
-    """Make ``cls`` a frozen dataclass (``eq=False``) and register it as a pytree whose
-    structure records the class: every field is a child, with ``GetAttrKey`` key paths.
-
-    Not ``jax.tree_util.register_dataclass``: up to jax 0.10.2 (the newest release when
-    this was written) the treedefs of two classes registered that way compare *equal*
-    whenever their fields have the same layout (``tree_structure(SO3(x)) ==
-    tree_structure(SE2(x))`` is True; only the hashes differ), so ``jax.jit``'s cache can
-    return the computation compiled for one class when called with the other. Measured:
-    400 distinct one-field classes through one jitted function gave 64 results computed
-    for another class; in this project's test suite, SO3.jlog's reference came out as
-    SE2's. ``tests/test_transforms.py`` checks that no two of our pytree classes (and no
-    user dataclass of the same layout) share a structure.
-    """
-    # Group elements keep MatrixLieGroup.__repr__ (rounded values, no dtype noise).
-    own_repr = not issubclass(cls, MatrixLieGroup)
-    cls = dataclasses.dataclass(frozen=True, eq=False, repr=own_repr)(cls)  # type: ignore[assignment]
-    cls.__setattr__ = _setattr_if_mutable  # type: ignore[assignment,method-assign]
-    names = tuple(f.name for f in dataclasses.fields(cls))
-    keys = tuple(jax.tree_util.GetAttrKey(n) for n in names)
-
-    def flatten_with_keys(x: Any) -> Tuple[Tuple[Any, ...], None]:
-        return tuple((k, getattr(x, n)) for k, n in zip(keys, names)), None
-
-    def flatten(x: Any) -> Tuple[Tuple[Any, ...], None]:
-        return tuple(getattr(x, n) for n in names), None
-
-    def unflatten(_: None, children: Iterable[Any]) -> Any:
-        # Bypass the frozen dataclass's __init__ (one object.__setattr__ per field either
-        # way; this saves the call): unflattening runs on every jitted call's outputs.
-        obj: Any = object.__new__(cls)
-        for n, c in zip(names, children):
-            object.__setattr__(obj, n, c)
-        return obj
-
-    jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
-    _register_flax_state(cls, names)
-    return cls
-
-
-def _setattr_if_mutable(self: Any, name: str, value: Any) -> None:
-    """Frozen (``dataclasses.FrozenInstanceError``), except on the copies that
-    ``jax_dataclasses.copy_and_mutate`` yields, which it marks with ``__mutability__``:
-    there a field may be reassigned, as on jaxlie's jax_dataclasses elements. With
-    ``validate=True`` (its default) the new value must have the old one's tree structure
-    and shapes, and a dtype of the same kind (jax_dataclasses' rule); else ``ValueError``."""
-    mode = getattr(self.__dict__.get("__mutability__"), "name", "FROZEN")
-    if mode == "FROZEN":
-        raise dataclasses.FrozenInstanceError(
-            f"cannot assign to field {name!r}: {type(self).__name__} is frozen (build a new "
-            f"element, use dataclasses.replace, or jax_dataclasses.copy_and_mutate)."
-        )
-    if mode == "MUTABLE":
-        old, new = getattr(self, name), value
-        old_leaves, old_def = jax.tree_util.tree_flatten(old)
-        new_leaves, new_def = jax.tree_util.tree_flatten(new)
-        same = bool(old_def == new_def) and all(  # type: ignore[operator]
-            onp.shape(a) == onp.shape(b)
-            and onp.result_type(a).kind == onp.result_type(b).kind
-            for a, b in zip(old_leaves, new_leaves)
-        )
-        if not same:
-            shown = [(onp.shape(x), str(onp.result_type(x))) for x in new_leaves]
-            want = [(onp.shape(x), str(onp.result_type(x))) for x in old_leaves]
-            raise ValueError(
-                f"{type(self).__name__}.{name}: copy_and_mutate needs the same structure, "
-                f"shapes and kind of dtype: got {shown}, had {want}."
-            )
-    object.__setattr__(self, name, value)
-
-
-try:  # flax is optional: serialization is registered only where it imports
-    _flax_serialization: Any = importlib.import_module("flax.serialization")
-except Exception:  # absent, or broken against this jax: then there is nothing to register
-    _flax_serialization = None
-
-
-def _register_flax_state(cls: type, names: Tuple[str, ...]) -> None:
-    """Register ``cls`` with ``flax.serialization`` (when flax is installed), as jaxlie's
-    jax_dataclasses does: the state dict is ``{field name: state of the field}``, e.g.
-    ``{"wxyz_xyz": array}``, so ``to_bytes``/``from_bytes`` and ``to_state_dict`` work and
-    a file written by either library loads in the other (same field names). Restoring
-    raises ``ValueError`` naming a missing or unknown field."""
-    if _flax_serialization is None:
-        return
-    ser = _flax_serialization
-
-    def to_state(x: Any) -> dict:
-        return {n: ser.to_state_dict(getattr(x, n)) for n in names}
-
-    def from_state(x: Any, state: dict) -> Any:
-        missing = [n for n in names if n not in state]
-        unknown = sorted(set(state) - set(names))
-        if missing or unknown:
-            raise ValueError(
-                f"{cls.__name__} state dict: missing field(s) {missing}, unknown field(s) "
-                f"{unknown}; expected exactly {list(names)}."
-            )
-        return dataclasses.replace(
-            x, **{n: ser.from_state_dict(getattr(x, n), state[n]) for n in names}
-        )
-
-    ser.register_serialization_state(cls, to_state, from_state)
-
-
-# ---------------------------------------------------------------------------------
-# jit-wrapping of public methods.
-
-_NOT_JITTED = frozenset({"get_batch_axes", "parameters", "reshape"})
-_JITTED_PRIVATE = {"_between": "relative element (a⁻¹ @ b)"}
-"""Private methods that public functions call eagerly (``manifold.rminus``, ``geodesic``),
-jitted too, with the name their error messages use: unjitted, an eager SE3 ``rminus`` of
-100 poses took 1.7 ms (one dispatch per primitive) against 90 µs."""
-_STATIC_NAMES = ("batch_axes", "dtype")
-
-
-def _inherited_doc(cls: type, name: str) -> Any:
-    """The docstring of ``name`` in the nearest base class that documents it."""
-    for base in cls.__mro__[1:]:
-        raw = base.__dict__.get(name)
-        fn = getattr(raw, "__func__", raw)
-        if fn is not None and getattr(fn, "__doc__", None):
-            return fn.__doc__
-    return None
-
-
-def check_elements(where: str, *args: Any) -> None:
-    """Check the group elements among ``args`` at trace time: parameters of shape
-    ``(*batch, parameters_dim)``, and batch axes that broadcast together (numpy rules).
-    Raises ``ValueError`` naming ``where`` and the shapes. Without the first check
-    ``SO3(tangent).log()`` silently read a 3-vector as a quaternion; without the second a
-    batch mismatch surfaced as jax.numpy's "mul got incompatible shapes", naming neither
-    the operation nor the group."""
-    batches = []
-    for a in args:
-        if not isinstance(a, MatrixLieGroup):
-            continue
-        shape = getattr(a.parameters(), "shape", None)
-        if shape is None:
-            continue
-        dtype = getattr(a.parameters(), "dtype", None)
-        if dtype is not None and jnp.issubdtype(dtype, jnp.complexfloating):
-            raise ValueError(f"{where}: {type(a).__name__} parameters must be real, got dtype {dtype}.")
-        if tuple(shape[-1:]) != (a.parameters_dim,):
-            raise ValueError(
-                f"{where}: {type(a).__name__} parameters must have shape "
-                f"(*batch, {a.parameters_dim}), got shape {tuple(shape)}."
-            )
-        batches.append(tuple(shape[:-1]))
-    check_batches(where, "batch axes", *batches)
-
-
-def check_batches(where: str, what: str, *batches: Tuple[int, ...]) -> Tuple[int, ...]:
-    """The broadcast of ``batches``; ``ValueError`` naming ``where``, ``what`` and the
-    shapes when they do not broadcast."""
-    try:  # jnp's, not numpy's: it takes jax.export's symbolic dimensions
-        return tuple(jnp.broadcast_shapes(*batches))
-    except ValueError:
-        shown = " and ".join(str(b) for b in batches)
-        raise ValueError(
-            f"{where}: {what} {shown} do not broadcast together (numpy rules)."
-        ) from None
-
-
-def _check_same_group(where: str, first: Any, *rest: Any) -> None:
-    """``TypeError`` naming ``where`` when a group element among ``rest`` is not of
-    ``first``'s group."""
-    for a in rest:
-        if isinstance(a, MatrixLieGroup) and type(a) is not type(first):
-            raise TypeError(f"{where}: expected {type(first).__name__}, got {type(a).__name__}.")
-
-
-def _checking_elements(fn: Any, where: str) -> Any:
-    """``fn`` preceded by ``check_elements`` on its arguments (``self``, ``other``).
-    Constructors cannot check (JAX rebuilds pytrees with shapes, tracers, None, and
-    ``jax.jacfwd`` of a group-valued function returns an element holding a Jacobian), so
-    the operations do. A method's other elements (``multiply``, ``interpolate``) must be of
-    ``self``'s group: ``TypeError`` (an SE3 passed to ``SO3.multiply`` raised
-    ``AttributeError: 'SE3' object has no attribute 'wxyz'``). Runs at trace time only."""
-
-    @functools.wraps(fn)
-    def checked(*args: Any, **kwargs: Any) -> Any:
-        if args and isinstance(args[0], MatrixLieGroup):
-            _check_same_group(where, *args, *kwargs.values())
-        check_elements(where, *args, *kwargs.values())
-        return fn(*args, **kwargs)
-
-    return checked
-
-
-def _jit_public_methods(cls: type) -> None:
-    """Wrap every public method of ``cls`` (inherited ones included) in ``jax.jit``.
-
-    Measured (benchmarks/RESULTS.md): an eager SE3.exp costs ~1.5 ms as a chain of
-    primitive dispatches and ~5 µs as one jitted call; inside a user's ``jit`` the wrapper
-    is inlined. ``batch_axes`` and ``dtype`` are static; shape errors still raise at trace
-    time.
-
-    A classmethod becomes, on each concrete class, a ``jax.jit`` of the function with
-    ``cls`` bound (stored as a staticmethod, its signature without ``cls``), as in jaxlie:
-    so ``SO3.exp`` is itself a jitted function and ``SO3.exp.lower(tangent)``,
-    ``.trace`` and ``.eval_shape`` work (ahead-of-time compilation). A subclass rebinds it.
-    """
-    for name in dir(cls):
-        if (name.startswith("_") and name not in _JITTED_PRIVATE) or name in _NOT_JITTED:
-            continue
-        raw = inspect.getattr_static(cls, name)
-        bound_of = getattr(getattr(raw, "__func__", None), "_classmethod", None)
-        if bound_of is not None:  # a classmethod bound to a base class: bind it to cls
-            raw = classmethod(bound_of)
-        kind = type(raw) if isinstance(raw, (classmethod, staticmethod)) else None
-        fn = raw.__func__ if kind else raw
-        if not inspect.isfunction(fn) or getattr(fn, "_jitted", False):
-            continue
-        if getattr(fn, "__isabstractmethod__", False):
-            continue
-        sig = inspect.signature(fn)
-        names = list(sig.parameters)
-        static = tuple(n for n in _STATIC_NAMES if n in names)
-        where = f"{cls.__name__} {_JITTED_PRIVATE[name]}" if name in _JITTED_PRIVATE else f"{cls.__name__}.{name}"
-        checked = _checking_elements(fn, where)
-        if kind is classmethod:
-            checked = functools.partial(checked, cls)
-            sig = sig.replace(parameters=list(sig.parameters.values())[1:])
-            names = names[1:]
-        argnums = tuple(names.index(n) for n in static)
-        jitted = jax.jit(checked, static_argnums=argnums, static_argnames=static)
-        if "batch_axes" in names:
-            pos = names.index("batch_axes")
-
-            def call(*args: Any, _jitted: Any = jitted, _pos: int = pos, **kwargs: Any) -> Any:
-                # Lists are unhashable: make batch_axes a tuple before jit sees it.
-                if len(args) > _pos and not isinstance(args[_pos], tuple):
-                    args = (*args[:_pos], tuple(args[_pos]), *args[_pos + 1 :])
-                elif not isinstance(kwargs.get("batch_axes", ()), tuple):
-                    kwargs["batch_axes"] = tuple(kwargs["batch_axes"])
-                return _jitted(*args, **kwargs)
-
-            for stage in ("lower", "trace", "eval_shape"):  # AOT, as on a jax.jit
-                if hasattr(jitted, stage):
-                    setattr(call, stage, getattr(jitted, stage))
-            call.__signature__ = sig  # type: ignore[attr-defined]  # (a jax.jit has its own)
-        else:
-            call = jitted  # type: ignore[assignment]
-        wrapper = functools.wraps(fn)(call)
-        wrapper._jitted = True  # type: ignore[attr-defined]
-        if not fn.__doc__:  # an override documented in the base class: show the base's text
-            wrapper.__doc__ = _inherited_doc(cls, name)
-        if kind is classmethod:
-            wrapper._classmethod = fn  # type: ignore[attr-defined]
-            setattr(cls, name, staticmethod(wrapper))
-        else:
-            setattr(cls, name, kind(wrapper) if kind else wrapper)
-
-
-_F = TypeVar("_F", bound=Callable[..., Any])
-
-
-def jit_function(*static_argnames: str) -> Callable[[_F], _F]:
-    """Decorator: wrap a module-level public function in ``jax.jit`` (the named arguments
-    static), as the group methods are, so that an eager call is one dispatch. Measured
-    eager before: ``jacobians.compose`` 228 µs, ``motion.arc`` 1.3 ms (one dispatch per
-    primitive). Shape errors still raise at trace time."""
-
-    def wrap(fn: _F) -> _F:
-        where = f"{fn.__module__.rsplit('.', 1)[-1]}.{fn.__name__}"
-        jitted = jax.jit(_checking_elements(fn, where), static_argnames=static_argnames)
-        return cast(_F, functools.wraps(fn)(lambda *args, **kwargs: jitted(*args, **kwargs)))
-
-    return wrap
-
-
-# ---------------------------------------------------------------------------------
-# Base classes.
+from ._batch import in_chunks
+from ._checks import as_float_array, check_batches, check_index, resolve_dtype
+from ._jit import jit_public_methods
+from ._xla import aligned, materialize, matmul_unrolled
 
 
 class MatrixLieGroup(abc.ABC):
     """Interface of a matrix Lie group whose elements are stored as parameter arrays.
 
-    Subclasses are frozen dataclasses with one array field (``unit_complex``, ``wxyz``,
-    ...), registered as pytrees with ``pytree_dataclass`` (see there why not
-    ``jax.tree_util.register_dataclass``).
+    Subclasses are frozen dataclasses with one array field named after its layout
+    (``unit_complex``, ``wxyz``, ``wxyz_xyz``, ...), registered as pytrees with
+    ``_pytree.pytree_dataclass``. Every public method of a concrete subclass is wrapped in
+    ``jax.jit`` with trace-time checks of its element arguments (``_jit``).
     """
 
     matrix_dim: ClassVar[int]
@@ -525,7 +77,7 @@ class MatrixLieGroup(abc.ABC):
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         if not inspect.isabstract(cls):
-            _jit_public_methods(cls)
+            jit_public_methods(cls)
 
     @classmethod
     @abc.abstractmethod
@@ -686,16 +238,17 @@ class MatrixLieGroup(abc.ABC):
             return self.apply(other)
         return NotImplemented
 
-    # -- geodesics (seed 001 §4) ----------------------------------------------------
+    # -- geodesics (Eberly 2024, §4) ----------------------------------------------
 
     def interpolate(self, other: Self, t: hints.Scalar) -> Self:
         """Point at time ``t`` on the geodesic from ``self`` (t = 0) to ``other`` (t = 1).
 
         Body form ``self @ exp(t · log(self⁻¹ @ other))``, which equals Eberly's left form
-        ``exp(t · log(other @ self⁻¹)) @ self`` (seed 001 eq. 9) except where the relative
-        rotation is exactly π, and which does not lose ε·|translation| to cancellation far
-        from the origin. At a relative rotation of exactly π the principal log's tie-break
-        applies (quaternion with w = 0 as stored: the axis is the stored one).
+        ``exp(t · log(other @ self⁻¹)) @ self`` (*Lie Groups and Lie Algebras*, 2024, eq. 9)
+        except where the relative rotation is exactly π, and which does not lose
+        ε·|translation| to cancellation far from the origin. At a relative rotation of
+        exactly π the principal log's tie-break applies (quaternion with w = 0 as stored:
+        the axis is the stored one).
 
         Args:
             other: end point; batch axes broadcast with ``self``.
@@ -703,30 +256,35 @@ class MatrixLieGroup(abc.ABC):
                 endpoints with ``t`` of shape (K,) give K poses; an outer product is
                 ``t[:, None]``). Values outside [0, 1] extrapolate along the same curve.
 
-        Memory: when ``self`` and ``other`` share one batch shape of at least 2^19 elements
-        and ``t`` broadcasts to it (a scalar ``t`` does), CPU evaluates it in 2^16-element
-        chunks, so the temporaries are a few MB instead of a multiple of the output (SE3,
-        2^22 elements: 5 MB against 268 MB; SO2, whose whole-batch kernel has no
-        temporaries, is not chunked).
+        Returns:
+            Elements of batch shape ``broadcast(self, other, t)``, dtype of the endpoints.
+
+        Large batches of one shape run in chunks on CPU, which bounds the temporaries
+        (``docs/design/memory-and-chunks.md``); the values are the same.
         """
-        from ._batch import in_chunks
-        from ._geodesic import geodesic
-
-        def path(a: Self, b: Self, t: Any) -> Self:
-            return geodesic(a, b)(t)
-
         t = jnp.asarray(t)  # lists and tuples too, as in geodesic
         batch = self.get_batch_axes()
         same = type(other) is type(self) and other.get_batch_axes() == batch
         t_shape = jnp.shape(t)
         t_fits = len(t_shape) <= len(batch) and all(
-            a in (1, b) for a, b in zip(t_shape[::-1], batch[::-1]))
+            a in (1, b) for a, b in zip(t_shape[::-1], batch[::-1])
+        )
         if self._interpolate_in_chunks and same and t_fits:
-            where = f"{type(self).__name__} geodesic"
             like = jnp.zeros((), jnp.result_type(self.parameters(), other.parameters()))
-            t = jnp.broadcast_to(as_float_array(t, "t", (), where, like=like), batch)
-            return in_chunks(path, batch, self, other, t)
-        return path(self, other, t)
+            t = as_float_array(t, "t", (), f"{type(self).__name__} geodesic", like=like)
+            return in_chunks(_interpolate, batch, self, other, jnp.broadcast_to(t, batch))
+        return _interpolate(self, other, t)
+
+    def _along(self, tangent: jax.Array, t: hints.Scalar) -> Self:
+        """``self @ exp(t · tangent)``, the geodesic through ``self`` with body velocity
+        ``tangent`` (``(*B, tangent_dim)``) at times ``t`` (broadcast against ``B``)."""
+        G = type(self)
+        where = f"{G.__name__} geodesic"
+        t = as_float_array(t, "t", (), where, like=tangent)
+        batch = check_batches(where, "batch axes of the path and of t", tangent.shape[:-1], t.shape)
+        t = jnp.broadcast_to(t.astype(jnp.result_type(t, tangent)), batch)
+        t, tangent = aligned(t[..., None], tangent)
+        return self.multiply(G.exp(t * tangent))
 
     # -- batch handling -------------------------------------------------------------
 
@@ -738,45 +296,10 @@ class MatrixLieGroup(abc.ABC):
         JAX."""
         index = index if isinstance(index, tuple) else (index,)
         index = tuple(bool(i) if isinstance(i, onp.bool_) else i for i in index)  # jnp fails on them
-        batch = self.get_batch_axes()
-
-        def static(i: Any) -> Optional[onp.ndarray]:  # integers or a mask, known now
-            if isinstance(i, (bool, onp.bool_)) or not isinstance(
-                i, (int, list, onp.ndarray, onp.integer)
-            ):
-                return None
-            a = onp.asarray(i)
-            return a if a.dtype.kind in "iu" or (a.dtype.kind == "b" and a.ndim > 0) else None
-
-        def width(i: Any) -> int:  # batch axes an entry consumes
-            if i is None or i is Ellipsis or isinstance(i, (bool, onp.bool_)):
-                return 0  # a scalar bool adds an axis, as None does
-            a = static(i) if not isinstance(i, jax.Array) else i
-            return a.ndim if a is not None and a.dtype == bool else 1
-
-        checked = list(index)
-        at = [k for k, i in enumerate(checked) if i is Ellipsis]  # `is`: ndarray == ... is elementwise
-        if len(at) == 1:
-            rest = len(batch) - sum(width(i) for i in checked)
-            checked[at[0] : at[0] + 1] = [slice(None)] * max(rest, 0)
-        axis = 0
-        for i in checked:  # static entries, from the left; a jax array ends the check
-            if width(i) == 0 and not isinstance(i, slice):
-                continue
-            a = None if isinstance(i, slice) else static(i)
-            if not isinstance(i, slice) and a is None:
-                break
-            n = batch[axis] if axis < len(batch) else 0
-            if a is not None and a.dtype != bool and isinstance(n, (int, onp.integer)):
-                if not onp.all((-n <= a) & (a < n)):  # (symbolic sizes: not checked)
-                    raise IndexError(
-                        f"{type(self).__name__}: index {i} is out of range for batch axes "
-                        f"{batch} (axis {axis})."
-                    )
-            axis += width(i)
+        check_index(type(self).__name__, self.get_batch_axes(), index)
         # In the stored layout, the parameter axis last: NumPy's rules put the advanced
         # indices' axes first when they are not adjacent, which keeps that axis last.
-        if not at:
+        if not any(i is Ellipsis for i in index):  # `is`: ndarray == ... is elementwise
             index = (*index, Ellipsis)
         return type(self)(self.parameters()[(*index, slice(None))])
 
@@ -857,6 +380,40 @@ class MatrixLieGroup(abc.ABC):
         return points
 
     @abc.abstractmethod
+    def _linear_part(self) -> jax.Array:
+        """R, the matrix of the action's linear part ``p ↦ R p (+ t)``:
+        ``(*batch, space_dim, space_dim)``."""
+
+    @classmethod
+    def _generator_action(cls, points: jax.Array) -> jax.Array:
+        """K(p) = d (hat(δ) p̃)[:space_dim] / dδ, ``(*batch, space_dim, tangent_dim)``, for
+        checked points ``(*batch, space_dim)`` (p̃ = (p, 1) when the matrix is homogeneous).
+        Entry (i, j) is Σ_l hat(e_j)[i, l] p̃_l, written out from the constant generators:
+        e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3)."""
+        n, d = cls.matrix_dim, cls.space_dim
+        coords = [points[..., i] for i in range(d)]
+        if n > d:  # homogeneous coordinates
+            coords.append(jnp.ones_like(coords[0]))
+        with jax.ensure_compile_time_eval():
+            E = onp.asarray(cls.hat(onp.eye(cls.tangent_dim)))  # (k, n, n), entries 0 and ±1
+
+        def combine(coeffs: onp.ndarray) -> jax.Array:  # Σ_l coeffs[l] · coords[l]
+            terms = [c * x for c, x in zip(coeffs.tolist(), coords) if c != 0.0]
+            return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(coords[0])
+
+        rows = [jnp.stack([combine(E[j, i]) for j in range(cls.tangent_dim)], -1) for i in range(d)]
+        return jnp.stack(rows, axis=-2)
+
+    def _action_jacobian(self, points: jax.Array) -> jax.Array:
+        """d (T ⊕ δ) p / dδ at δ = 0 = R K(p) (Solà et al. 2018, eqs. 166 and 181), for
+        points ``(*batch, space_dim)`` of the element's dtype, aligned with it:
+        ``(*batch, space_dim, tangent_dim)``."""
+        R = self._linear_part()
+        batch = jnp.broadcast_shapes(R.shape[:-2], points.shape[:-1])
+        K = self._generator_action(jnp.broadcast_to(points, (*batch, points.shape[-1])))
+        return matmul_unrolled(jnp.broadcast_to(R, (*batch, *R.shape[-2:])), K)
+
+    @abc.abstractmethod
     def _rplus_jacobian(self) -> jax.Array:
         """d parameters(T @ exp(δ)) / dδ at δ = 0: ``(*batch, parameters_dim, tangent_dim)``."""
 
@@ -872,9 +429,8 @@ class SOBase(MatrixLieGroup):
 
     _kernels_reread: ClassVar[bool] = True
     """Whether the kernels read each input component several times (SO3's rotation and
-    Hamilton product; ``materialize`` has the numbers), so that a computed input is best
-    materialized first. SO2's read each twice: ``SE2.exp(x).inverse()`` took 13.6 against 10.2 ns per
-    element with a barrier (10^6, float32, 2-core VM)."""
+    Hamilton product), so that a computed input is best materialized first; SO2's read
+    each twice and are faster without (``docs/design/memory-and-chunks.md``)."""
 
     def _apply_kernel(self, points: jax.Array) -> jax.Array:
         """``apply`` on checked points, with no ``materialize``."""
@@ -889,8 +445,13 @@ class SOBase(MatrixLieGroup):
         homogeneous matrix or Jacobians); SO2 overrides it."""
         return self.as_matrix()
 
+    def _linear_part(self) -> jax.Array:
+        return self._matrix_block()
+
 
 ContainedSOType = TypeVar("ContainedSOType", bound=SOBase)
+GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+"""An element of any one group (shared by the modules that take elements)."""
 
 
 class SEBase(Generic[ContainedSOType], MatrixLieGroup):
@@ -960,6 +521,9 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         )
         rot = cls._rotation_type.identity(t.shape[:-1], dtype=t.dtype)
         return cls.from_rotation_and_translation(rot, t)
+
+    def _linear_part(self) -> jax.Array:
+        return self.rotation()._matrix_block()
 
     def rotation(self) -> ContainedSOType:
         """The rotation part (SO2 / SO3), same batch axes."""
@@ -1066,3 +630,35 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
             [Rm, jnp.zeros((*batch, n, Jq.shape[-1]), Rm.dtype)], axis=-1
         )
         return jnp.concatenate([top, bottom], axis=-2)
+
+
+def _interpolate(a: GroupT, b: GroupT, t: Any) -> GroupT:
+    """``a @ exp(t · log(a⁻¹ @ b))``: ``interpolate``'s body, element by element."""
+    return a._along(a._between(b).log(), t)
+
+
+def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
+    """Stack elements of one group along a new batch axis.
+
+    Args:
+        elements: elements of one group, all of the same batch shape ``B``.
+        axis: position of the new axis, counted among the batch axes (the parameter axis
+            stays last); negative values count from the end of ``(*B, new)``.
+
+    Returns:
+        An element of batch shape ``B`` with ``len(elements)`` inserted at ``axis``.
+
+    Raises:
+        ValueError: no elements, or ``axis`` out of range.
+        TypeError: elements of different groups.
+    """
+    elements = list(elements)
+    if not elements:
+        raise ValueError("stack: need at least one element.")
+    G = type(elements[0])
+    if any(type(e) is not G for e in elements):
+        raise TypeError("stack: all elements must be of the same group.")
+    ndim = len(elements[0].get_batch_axes()) + 1
+    if not -ndim <= axis < ndim:
+        raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
+    return G(jnp.stack([e.parameters() for e in elements], axis=axis % ndim))

@@ -1,33 +1,14 @@
-"""Batch handling: stacking group elements along a new axis, and evaluating a large batch
-in chunks."""
+"""Evaluating an elementwise function over a large batch in chunks, on CPU, to bound its
+temporaries (``docs/design/memory-and-chunks.md``). A leaf module."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence, Tuple, TypeVar
+from typing import Any, Callable, Sequence, Tuple
 
 import jax
 import jax.numpy as jnp
 
-from ._base import MatrixLieGroup, static_size
-
-GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
-
-
-def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
-    """Stack elements of one group (equal batch shapes) along a new batch axis ``axis``
-    (counted among the batch axes, so the parameter axis stays last)."""
-    elements = list(elements)
-    if not elements:
-        raise ValueError("stack: need at least one element.")
-    G = type(elements[0])
-    if any(type(e) is not G for e in elements):
-        raise TypeError("stack: all elements must be of the same group.")
-    ndim = len(elements[0].get_batch_axes()) + 1
-    if not -ndim <= axis < ndim:
-        raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
-    axis = axis % ndim
-    return G(jnp.stack([e.parameters() for e in elements], axis=axis))
-
+from ._checks import static_size
 
 CHUNK = 2**16
 """Elements per chunk in ``in_chunks``."""
@@ -71,20 +52,15 @@ def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
     Every leaf of ``args`` (group elements, arrays) must have leading axes ``batch``, and
     ``f`` must act element by element along them and take every array it depends on as an
     argument (a closed-over tracer would lose its derivative in the custom JVP). Under
-    ``vmap`` the decision sees the per-example batch. Why: a whole-batch kernel keeps its
-    intermediates as whole-batch arrays, out of cache. SE3 ``interpolate`` at 2^22
-    elements (float32) held 268 MB of temporaries, 2.3x its 117 MB output; in chunks, 5 MB.
-    Measured on the 2-core VM, whole → chunked, ns/element: interpolate 82 → 59 at 2^22 and
-    79 → 53 at 2^19 (at 4·10^5 whole batches were faster, 47 against 55); SE3 exp at 10^6
-    39 → 29 (float32), 76 → 55 (float64). Ops whose kernels keep few temporaries got slower
-    in chunks (SE3 log 10 → 99, compose 9.6 → 12.9, SO3 exp 10 → 13: the loop's last
-    fusion, writing into the output, runs on one thread), so only those two use it.
+    ``vmap`` the decision sees the per-example batch. A whole-batch kernel keeps its
+    intermediates as whole-batch arrays, out of cache; in chunks they stay a few MB. Which
+    operations use it, and the measurements: ``docs/design/memory-and-chunks.md``.
 
     The last chunk is shifted back to end at the batch's end (it recomputes part of its
     predecessor rather than padding, which would copy every input). Derivatives (a custom
-    JVP) differentiate the whole-batch ``f``: through the chunk loop, SE3's gradient at
-    10^6 took 720 ns/element against 424. GPUs are left whole: a loop there syncs with the
-    host every iteration, and it is not measured. With several CPU devices the batch may
+    JVP) differentiate the whole-batch ``f``, which is faster than through the loop. GPUs
+    are left whole: a loop there syncs with the host every iteration. With several CPU
+    devices the batch may
     be sharded, and it is evaluated whole (see ``_batch_may_be_sharded``) except inside
     ``shard_map``.
     """

@@ -1,17 +1,16 @@
-"""Geodesic paths between group elements (seed 001 §4 and §6's two GeodesicPath variants),
-and the relative element ``between(a, b) = a⁻¹ @ b`` they start from."""
+"""Geodesic paths between group elements (Eberly, *Lie Groups and Lie Algebras*, 2024, §4,
+and the two ``GeodesicPath`` variants of §6), and the relative element
+``between(a, b) = a⁻¹ @ b`` they start from."""
 
 from __future__ import annotations
 
-from typing import Generic, TypeVar
+from typing import Generic
 
 import jax
-import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, aligned, as_float_array, check_batches, pytree_dataclass
-
-GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+from ._base import GroupT, MatrixLieGroup
+from ._pytree import pytree_dataclass
 
 
 @pytree_dataclass
@@ -31,13 +30,7 @@ class Geodesic(Generic[GroupT]):
     def __call__(self, t: hints.Scalar) -> GroupT:
         """Element at time(s) ``t``; ``t`` broadcasts numpy-style against the batch axes
         (shape ``broadcast(B, t.shape)``)."""
-        G = type(self.start)
-        where = f"{G.__name__} geodesic"
-        t = as_float_array(t, "t", (), where, like=self.tangent)
-        batch = check_batches(where, "batch axes of the path and of t", self.tangent.shape[:-1], t.shape)
-        t = jnp.broadcast_to(t.astype(jnp.result_type(t, self.tangent)), batch)
-        t, tangent = aligned(t[..., None], self.tangent)
-        return self.start.multiply(G.exp(t * tangent))
+        return self.start._along(self.tangent, t)
 
 
 def geodesic(start: GroupT, end: GroupT) -> Geodesic[GroupT]:

@@ -21,11 +21,13 @@ Both branches are evaluated on clamped arguments (the ``jnp.where``-safe pattern
 no NaN or inf from the unused branch reaches a gradient. The switch sits where the
 closed form's value *and its first two autodiff derivatives* are accurate, which for
 cancellation-prone kernels is far from zero (``x = 10`` for F2, 12 for C2, 30 for D, 16 for
-G): a trig formula above a small cutoff is not enough (seed 001 §11.4 and issue [2]). D and G
-switched at 12 and π² until a grid of step 0.1 found D″ at 63 ulp (x = 13.4) and G′ at 8.5
-(x ≈ 10) on CPU; an H100 had measured them at 65.5 and 8.2.
+G). A trig formula above a small cutoff, as in Eberly 2024, §11.4 (constants below
+θ = 0.0625), does not meet the library's accuracy requirement: values within 4 ulp, first
+derivatives within 8 ulp and second derivatives within 64 (the bounds
+``tests/test_scalar.py`` asserts). Lower switches do not either: with D switched at x = 12
+and G at π², D″ reaches 63 ulp (x = 13.4) and G′ 8.5 ulp (x ≈ 10).
 
-Notation (seed 001 §9–11, with θ² = x):
+Notation (F0, F1, F2 as in Eberly 2024, §11, eq. 42; all written as functions of x = θ²):
 
 ========  ================================  =======================  =========
 name      function                          series Σ aₖ xᵏ           value at 0
@@ -143,7 +145,9 @@ def _n_terms(name: str, x_max: float, eps: float) -> int:
     for k in range(len(coeffs)):
         ok = True
         for order in range(3):
-            terms = [c * falling(j, order) * x_max ** max(j - order, 0) for j, c in enumerate(coeffs)]
+            terms = [
+                c * falling(j, order) * x_max ** max(j - order, 0) for j, c in enumerate(coeffs)
+            ]
             partials = [sum(terms[: i + 1]) for i in range(order, k + 1)]
             smallest = min((abs(p) for p in partials), default=0.0)
             tail = sum(abs(t) for t in terms[k + 1 :])
@@ -178,8 +182,8 @@ def _switched(
 def _split(a: jax.Array) -> Tuple[jax.Array, jax.Array]:
     """Dekker's split a = hi + lo, each half the mantissa (exact without FMA). The splitter
     is 2^⌈p/2⌉ + 1 for a p-bit significand: 12 bits for float32, 27 for float64, 6 for
-    float16, 4 for bfloat16 (float64's 2^27 + 1 overflows float16 to inf, and the sums
-    built on it turned NaN)."""
+    float16, 4 for bfloat16 (a fixed 2^27 + 1 would overflow float16 to inf, and the sums
+    built on it to NaN)."""
     bits = (jnp.finfo(a.dtype).nmant + 2) // 2
     c = (2.0**bits + 1.0) * a
     hi = c - (c - a)
@@ -209,8 +213,8 @@ def _two_sum(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
 
 
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Dot product over the last axis, written out (a reduce would split XLA's fusion, and
-    ``jnp.sum`` made ``unit`` 2x slower at 10^6 elements)."""
+    """Dot product over the last axis, ``(*batch, n) -> batch``, written out as products and
+    sums rather than a reduction, so that it stays in its neighbours' fused loop."""
     out = a[..., 0] * b[..., 0]
     for i in range(1, a.shape[-1]):
         out = out + a[..., i] * b[..., i]
@@ -226,8 +230,8 @@ def sq_norm(w: jax.Array) -> jax.Array:
 def sq_norm_compensated(w: jax.Array) -> Tuple[jax.Array, jax.Array]:
     """‖w‖² over the last axis as hi + lo with |lo| ≤ ulp(hi): about twice the working
     precision (compensated sum of exact squares). Differentiated as the plain ‖w‖²
-    (d hi = 2 w·dw, d lo = 0): the low part only refines the value, and tracing the
-    error-free transformations made gradients 3-6x slower."""
+    (d hi = 2 w·dw, d lo = 0): the low part only refines the value, and differentiating
+    the error-free transformations would only add work."""
     p, err = _two_square(w[..., 0])
     for i in range(1, w.shape[-1]):
         q, e = _two_square(w[..., i])
@@ -292,7 +296,7 @@ def cos_(x: jax.Array, x_lo: Optional[jax.Array] = None) -> jax.Array:
 
 
 def sinc(x: jax.Array, x_lo: Optional[jax.Array] = None) -> jax.Array:
-    """F0 = sin θ / θ as a function of x = θ² (+ x_lo) (seed 001 §11.1). Series below
+    """F0 = sin θ / θ as a function of x = θ² (+ x_lo) (Eberly 2024, §11.1). Series below
     x = 1."""
 
     def closed(x: jax.Array) -> jax.Array:
@@ -396,7 +400,8 @@ def F1(x: jax.Array) -> jax.Array:
 
 
 def F2(x: jax.Array, f0: Optional[jax.Array] = None) -> jax.Array:
-    """F2 = (θ − sin θ)/θ³ = (1 − F0)/θ² (seed 001 §11.3; eq. 42's third term is θ⁴/7!).
+    """F2 = (θ − sin θ)/θ³ = (1 − F0)/θ² (Eberly 2024, §11.3; the third term of the series
+    in eq. 42 is θ⁴/7!, not θ⁶/7!).
 
     The closed form cancels below θ ≈ 1.7 (1000 ulp at θ = 0.0625 in float32), its
     derivatives longer still, so the series runs up to x = 10 (θ ≈ 3.16). Above, with
@@ -432,7 +437,7 @@ def D(x: jax.Array) -> jax.Array:
 
 def G(x: jax.Array) -> jax.Array:
     """G = (1 − (θ/2) cot(θ/2))/θ², the ω̂² coefficient of the inverse SO(3) Jacobian
-    and of the SE(3) log's V⁻¹ (the seeds' (θ/2)cot(θ/2) form: 1 − θ²G).
+    and of the SE(3) log's V⁻¹ ((θ/2)cot(θ/2) = 1 − θ²G, the form of Zhang 2022, §9).
 
     Summed from its all-positive Bernoulli series for x < 16 (convergence ratio
     x/4π² ≤ 0.41); above that, the closed form (1 − h)/x with h < 0, which has no
@@ -482,15 +487,13 @@ def unit(v: jax.Array) -> jax.Array:
     bits: float32 2^-100, float64 2^-967) that flushed squares could matter, ``v`` is first
     scaled by a power of two, 2^-(emax/2 + 2) (float32 2^-66) or 2^(3|emin|/4) (float32
     2^94; capped so that the scaled sum stays below 2^(emax − 2): float16, whose range is
-    too narrow for both, gets 2^7, and its squares overflowed at 2^10, NaN for components
-    of 0.5), which makes the largest square a normal float and keeps the sum finite.
+    too narrow for both, gets 2^7: at 2^10 its squares overflow, NaN for components of
+    0.5), which makes the largest square a normal float and keeps the sum finite.
     Power-of-two scaling is exact, so elsewhere the result is bit for bit the plain
-    ``v / √(Σ vᵢ²)``. The plain form returned 0 for a float32 quaternion with components
-    of 3e38 and inf/NaN at 1e-30. A zero or non-finite ``v`` (subnormal components count
-    as zero: XLA:CPU flushes them) has no direction and gives NaN in every component.
-    Derivatives are those of the plain formula (the scale is piecewise constant).
-    10^6 float32 quaternions, 2-core VM: 1.1 ns/element, jaxlie 2.5, ``q / jnp.linalg.norm``
-    2.8; the NaN constant the select took before cost 1.5x here and 4x at 10^3."""
+    ``v / √(Σ vᵢ²)``, which gives 0 for a float32 quaternion with components of 3e38 and
+    inf/NaN at 1e-30. A zero or non-finite ``v`` (subnormal components count as zero:
+    XLA:CPU flushes them) has no direction and gives NaN in every component. Derivatives
+    are those of the plain formula (the scale is piecewise constant)."""
     if not jnp.issubdtype(v.dtype, jnp.floating):  # integers: the default float, as elsewhere
         v = v.astype(jax.dtypes.canonicalize_dtype(jnp.float64))
     fi = jnp.finfo(v.dtype)

@@ -4,18 +4,20 @@ from __future__ import annotations
 
 from typing import Callable, Optional
 
-import numpy as np
-
 import jax
 import jax.numpy as jnp
+import numpy as onp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array, check_batches, constant, pytree_dataclass
+from ._base import SEBase
+from ._checks import as_float_array, check_batches
+from ._pytree import pytree_dataclass
 from ._so2 import SO2
+from ._xla import constant
 
 _I2, _ROT90, _E02, _E12, _E22 = (
-    np.array(m, dtype=np.float64).reshape(3, 3)
+    onp.array(m, dtype=onp.float64).reshape(3, 3)
     for m in (
         [1, 0, 0, 0, 1, 0, 0, 0, 0],
         [0, -1, 0, 1, 0, 0, 0, 0, 0],
@@ -31,7 +33,9 @@ class SE2(SEBase[SO2]):
     """Special Euclidean group of planar rigid transforms ``x ↦ R x + t``.
 
     Parameters: ``unit_complex_xy = (cos θ, sin θ, x, y)``, shape ``(*batch, 4)``.
-    Tangent: ``(vx, vy, θ)``, translation first (jaxlie's order), shape ``(*batch, 3)``.
+    Tangent: ``(vx, vy, θ)``, translation first (jaxlie's order; Eberly 2024, §8, puts the
+    angle first), shape ``(*batch, 3)``. Matrix: ``[[R, t], [0, 1]]``, acting on
+    homogeneous points ``(x, y, 1)``.
     """
 
     unit_complex_xy: jax.Array
@@ -45,12 +49,26 @@ class SE2(SEBase[SO2]):
 
     @staticmethod
     def from_xy_theta(x: hints.Scalar, y: hints.Scalar, theta: hints.Scalar) -> SE2:
-        """Transform with translation ``(x, y)`` and rotation ``theta``; the three
-        broadcast to a common batch shape."""
+        """Transform with translation ``(x, y)`` and rotation by ``theta`` radians.
+
+        Args:
+            x: translation along x.
+            y: translation along y.
+            theta: rotation angle, radians. The three are scalars or arrays that broadcast
+                to a common batch shape.
+
+        Returns:
+            SE2 with that batch shape.
+
+        Raises:
+            ValueError: the shapes do not broadcast.
+        """
         x = as_float_array(x, "x", (), "SE2.from_xy_theta")
         y = as_float_array(y, "y", (), "SE2.from_xy_theta")
         theta = as_float_array(theta, "theta", (), "SE2.from_xy_theta")
-        batch = check_batches("SE2.from_xy_theta", "shapes of x, y, theta", x.shape, y.shape, theta.shape)
+        batch = check_batches(
+            "SE2.from_xy_theta", "shapes of x, y, theta", x.shape, y.shape, theta.shape
+        )
         x, y, theta = (jnp.broadcast_to(a, batch) for a in (x, y, theta))
         return SE2.from_rotation_and_translation(
             SO2.from_radians(theta), jnp.stack([x, y], axis=-1)
@@ -59,14 +77,20 @@ class SE2(SEBase[SO2]):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SE2:
-        """``(*batch, 3)`` tangent (vx, vy, θ) -> SE2 of batch ``batch``.
+        """Exponential map of the tangent (vx, vy, θ).
 
         R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
-        B = (1 − cos θ)/θ = θ F1 (seed 001 §8.1; seed 000 §5 derives the same arc),
-        all from one half-angle sincos: with c = cos(θ/2), k = sinc(θ/2), s = θk/2 =
-        sin(θ/2): A = c k, B = s k, sin θ = 2 s c, cos θ = (c − s)(c + s) (absolute error
-        ~eps at every angle). A second sincos, of θ, doubled the cost: 41 → 20 ns/element
-        at 10^6 in float32 (2 cores), for ≤ 0.5 ulp more worst error (2.0, README table)."""
+        B = (1 − cos θ)/θ = θ F1 (Eberly 2024, §8.1, eq. 21; Zhang 2022, §5.1–5.2, derives
+        the same arc). All come from one half-angle sincos: with c = cos(θ/2),
+        k = sinc(θ/2) and s = θk/2 = sin(θ/2), A = c k, B = s k, sin θ = 2 s c and
+        cos θ = (c − s)(c + s) (absolute error ~eps at every angle).
+
+        Args:
+            tangent: ``(*batch, 3)``, ``(vx, vy, θ)``.
+
+        Returns:
+            SE2 with batch axes ``batch``.
+        """
         xi = cls._check_tangent(tangent)
         vx, vy, theta = xi[..., 0], xi[..., 1], xi[..., 2]
         c, k = _scalar.half_angle_of(theta)
@@ -78,10 +102,12 @@ class SE2(SEBase[SO2]):
 
     @override
     def log(self) -> jax.Array:
-        """Tangent (vx, vy, θ), ``(*batch, 3)``, θ = ``rotation().as_radians()`` in [−π, π].
+        """Principal logarithm: the tangent (vx, vy, θ), ``(*batch, 3)``, with
+        θ = ``rotation().as_radians()`` in [−π, π].
 
-        θ = atan2(s, c); v = V⁻¹ t with V⁻¹ = h I − (θ/2) J, h = (θ/2)cot(θ/2)
-        = 1 − θ² G(θ²) (the inverse of exp's V; A² + B² = sinc²(θ/2))."""
+        θ = atan2(s, c) (Eberly 2024, §8.2); v = V⁻¹ t with V⁻¹ = h I − (θ/2) J, J the 90°
+        rotation and h = (θ/2)cot(θ/2) = 1 − θ² G(θ²) (the inverse of exp's V, since
+        A² + B² = sinc²(θ/2); Zhang 2022, §5.3, reaches the same velocity geometrically)."""
         p = self.unit_complex_xy
         c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
         theta = jnp.arctan2(s, c)
@@ -109,7 +135,9 @@ class SE2(SEBase[SO2]):
 
     @override
     def adjoint(self) -> jax.Array:
-        """``(*batch, 3, 3)``: [[R, (ty, −tx)ᵀ], [0, 1]] for the (vx, vy, θ) ordering."""
+        """Adjoint ``Ad(T)``, ``(*batch, 3, 3)``: [[R, (ty, −tx)ᵀ], [0, 1]] for the
+        (vx, vy, θ) ordering (Eberly 2024, eq. 24, with the blocks permuted to translation
+        first)."""
         p = self.unit_complex_xy
         c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
         z, one = jnp.zeros_like(c), jnp.ones_like(c)
@@ -133,9 +161,9 @@ class SE2(SEBase[SO2]):
     ) -> jax.Array:
         """[[a, −b, p], [b, a, q], [0, 0, corner]], shape ``(*batch, 3, 3)`` (``a = None``:
         0), the shape of every SE(2) Jacobian. Built as broadcast scalars times constant
-        3×3 patterns, not as a stack: XLA fuses a stack's operands into one loop that
-        evaluates each entry on its own, and recomputed the kernels they share (jlog: the
-        atan2 and G's series, 6 times per element: 66 → 52 ns/element at 10^5, float32)."""
+        3×3 patterns rather than as a stack, so that the kernels several entries share
+        (jlog: the atan2 and G's series) are evaluated once per element, not once per
+        entry."""
         terms = [(b, _ROT90), (p, _E02), (q, _E12)] + ([] if a is None else [(a, _I2)])
         like = p[..., None, None]
         out = corner * constant(_E22, like)
@@ -162,8 +190,7 @@ class SE2(SEBase[SO2]):
         h = (θ/2)cot(θ/2) = 1 − θ² G(θ²): ``jac_right`` inverted in closed form. Its
         translation column −M⁻¹p (p from Solà et al. 2018, eq. 163) simplifies, with
         1 − cos θ = 2 sin²(θ/2), to (θG I − ½ J) ρ, J the 90° rotation: one kernel (G)
-        where the literal inverse needs F1, F2 and G (62 → 16 ns/element at 10^5 in
-        float32, ``benchmarks/jacobians.py``)."""
+        where the literal inverse needs F1, F2 and G."""
         return cls._jac_right_inv(cls._check_tangent(tangent, "jac_right_inv"), _scalar.G)
 
     @override

@@ -9,13 +9,15 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SEBase, as_float_array, materialize, matmul, pytree_dataclass
+from ._base import SEBase
 from ._batch import in_chunks
+from ._checks import as_float_array
+from ._pytree import pytree_dataclass
+from ._scalar import dot, sq_norm
 from ._so3 import (
     SO3,
-    cross,
     by_angle,
-    dot,
+    cross,
     exp_half_angle,
     exp_quaternion,
     jac_right_inv_so3,
@@ -23,39 +25,56 @@ from ._so3 import (
     log_quaternion_parts,
     skew,
     skew_sq,
-    sq_norm,
 )
+from ._xla import materialize, matmul
 
 
-def _dot(a: jax.Array, b: jax.Array) -> jax.Array:
-    return dot(a, b)[..., None]
+_FORMS = ("axis_split", "textbook")
+
+
+def _check_form(form: str) -> None:
+    if form not in _FORMS:
+        raise ValueError(f"SE(3) translation kernel: form must be one of {_FORMS}, got {form!r}.")
 
 
 def exp_translation(
     v: jax.Array,
     w: jax.Array,
-    form: str = "seed000",
+    form: str = "axis_split",
     half: Optional[Tuple[jax.Array, jax.Array]] = None,
     compensated: bool = True,
 ) -> jax.Array:
-    """t = V(ω) v, θ = ‖ω‖, in one of two algebraically equal forms:
+    """Translation t = V(ω) v of ``SE3.exp((v, ω))``, θ = ‖ω‖, in one of two equal forms.
 
-    * ``"textbook"``: v + F1 (ω × v) + F2 ω × (ω × v) (seed 001 eq. 36, Barfoot eq. 7.82);
-      beyond π, v and θ²F2·v ≈ v cancel to the much shorter t (14 ulp at θ ≈ 29);
-    * ``"seed000"``: (R − I)(v × ω)/θ² + (vᵀω)ω/θ² (seed 000 §8.4 with ω = θ·axis), which
-      with ω × (v × ω) = θ² v⊥ reduces to F0 v + F1 (ω × v) + F2 (ω·v) ω — no 0/0 left and
-      no cancellation at large angles (F0 = sin θ/θ is computed directly).
+    Args:
+        v: ``(*batch, 3)``, the tangent's translation part.
+        w: ``(*batch, 3)``, the tangent's rotation vector ω.
+        form: which algebraically equal expression to evaluate:
 
-    F0 = c k, F1 = k²/2 and F2 come from ``half`` = (cos(θ/2), sin(θ/2)/(θ/2))
-    (``exp_half_angle``), so exp costs one sincos in all. ``compensated``: the seed000
-    form's ω·v as an error-free dot, needed only near θ = 2πk (see ``by_angle``).
+            * ``"textbook"``: v + F1 (ω × v) + F2 ω × (ω × v) (Eberly 2024, eq. 36;
+              Barfoot 2017, eq. 7.82). Beyond π, v and θ²F2·v ≈ v cancel to the much
+              shorter t (14 ulp at θ ≈ 29).
+            * ``"axis_split"`` (default): v split along and across the rotation axis,
+              F0 v + F1 (ω × v) + F2 (ω·v) ω. This is Zhang 2022, §8.4,
+              t = θ⁻¹(R − I)(v × a) + (vᵀa) a for a *unit* axis a, rewritten for the
+              tangent's ω = θa with ω × (v × ω) = θ² v⊥: no 0/0 is left, and nothing
+              cancels at large angles (F0 = sin θ/θ is computed directly).
+        half: ``(cos(θ/2), sin(θ/2)/(θ/2))``, each of shape ``batch``, from
+            ``exp_half_angle``; passing it shares one sincos with the rotation.
+        compensated: evaluate the ``"axis_split"`` form's ω·v as an error-free dot
+            (``_scalar.dot_compensated``), needed only near θ = 2πk with v ⟂ ω, where
+            F0 → 0 (see ``by_angle``).
+
+    Returns:
+        ``(*batch, 3)``: t, with F0 = c·k, F1 = k²/2 and F2 all read from ``half``.
     """
+    _check_form(form)
     c, k = exp_half_angle(w) if half is None else half
     x = sq_norm(w)
     f0 = c * k
     wxv = cross(w, v)
     f1, f2 = (0.5 * k * k)[..., None], _scalar.F2(x, f0)[..., None]
-    if form == "seed000":
+    if form == "axis_split":
         # cancels for v ⟂ ω near θ = 2πk, where F0 → 0; see the kernel
         wv = (materialize(_scalar.dot_compensated(w, v)) if compensated else dot(w, v))[..., None]
         return f0[..., None] * v + f1 * wxv + f2 * wv * w
@@ -63,32 +82,51 @@ def exp_translation(
 
 
 def log_translation(
-    t: jax.Array, u: jax.Array, s: jax.Array, h: jax.Array, form: str = "seed000"
+    t: jax.Array, u: jax.Array, s: jax.Array, h: jax.Array, form: str = "axis_split"
 ) -> jax.Array:
-    """v = V(ω)⁻¹ t for the principal log (θ ≤ π), with ω = s·u and h = (θ/2)cot(θ/2) from
-    ``log_quaternion_parts``, in two algebraically equal forms:
+    """Translation part v = V(ω)⁻¹ t of the principal ``SE3.log`` (θ ≤ π).
 
-    * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot eq. 7.85, G from _scalar); the
-      last term cancels t⊥ near π, where h → 0 (5 ulp measured at π − 1e-3, |t| = 1e3);
-    * ``"seed000"``: (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (seed 000 §9), evaluated as
-      h t − ½ s (u × t) + G s² (u·t) u (= h t⊥ + t∥ − ½ ω × t: two non-negative multiples of
-      t∥, no cancellation; u is stored, so ω's rounding is not multiplied by |t|).
+    Args:
+        t: ``(*batch, 3)``, the translation.
+        u: ``(*batch, 3)``, the quaternion's vector part, sign chosen so that w ≥ 0
+            (from ``log_quaternion_parts``).
+        s: shape ``batch``, θ/‖u‖, so that ω = s·u.
+        h: shape ``batch``, (θ/2)cot(θ/2).
+        form: which algebraically equal expression to evaluate:
+
+            * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot 2017, eq. 7.85; G from
+              ``_scalar``). The last term cancels t⊥ near π, where h → 0 (5 ulp at
+              π − 1e-3, |t| = 1e3).
+            * ``"axis_split"`` (default): t split along and across the axis,
+              (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (Zhang 2022, §9, rewritten for
+              ω = θ·axis), evaluated as h t − ½ s (u × t) + G s² (u·t) u
+              (= h t⊥ + t∥ − ½ ω × t): two non-negative multiples of t∥, no cancellation;
+              u is stored, so ω's rounding is not multiplied by |t|.
+
+    Returns:
+        ``(*batch, 3)``: v.
     """
+    _check_form(form)
     w = s[..., None] * u
     x = sq_norm(w)
     g = _scalar.G_principal(x)
-    if form == "seed000":
+    if form == "axis_split":
         # G s² = (1 − h)/‖u‖² exactly; where h < ½ (θ > 2.3) that form has no cancellation
         # and does not carry s's rounding twice (5 → 3 ulp in v near π, |t| = 1e3).
         far = h < 0.5
         n2 = jnp.where(far, sq_norm(u), 1.0)
         coef = jnp.where(far, (1.0 - h) / n2, g * s * s)
-        return h[..., None] * t - (0.5 * s)[..., None] * cross(u, t) + (coef * dot(u, t))[..., None] * u
+        return (
+            h[..., None] * t
+            - (0.5 * s)[..., None] * cross(u, t)
+            + (coef * dot(u, t))[..., None] * u
+        )
     wxt = cross(w, t)
     return t - 0.5 * wxt + g[..., None] * cross(w, wxt)
 
 
-_KERNEL_FORM = "seed000"  # more accurate (see the docstrings); speed in benchmarks/RESULTS.md
+# The more accurate form (see exp_translation); speed: docs/design/se3-kernel-forms.md.
+_KERNEL_FORM = "axis_split"
 
 
 @pytree_dataclass
@@ -96,8 +134,9 @@ class SE3(SEBase[SO3]):
     """Special Euclidean group of 3D rigid transforms ``x ↦ R x + t``.
 
     Parameters: ``wxyz_xyz = (qw, qx, qy, qz, x, y, z)``, shape ``(*batch, 7)``.
-    Tangent: ``(vx, vy, vz, ωx, ωy, ωz)``, translation first (jaxlie's order; Eberly's
-    seed 001 §10 and GTSAM put the rotation first), shape ``(*batch, 6)``.
+    Tangent: ``(vx, vy, vz, ωx, ωy, ωz)``, translation first (jaxlie's order; Eberly 2024,
+    §10, and GTSAM put the rotation first), shape ``(*batch, 6)``. Matrix:
+    ``[[R, t], [0, 1]]``, acting on homogeneous points ``(x, y, z, 1)``.
     """
 
     wxyz_xyz: jax.Array
@@ -112,22 +151,28 @@ class SE3(SEBase[SO3]):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SE3:
-        """``(*batch, 6)`` tangent (v, ω) -> SE3 of batch ``batch``.
+        """Exponential map of the tangent (v, ω).
 
-        q = exp_SO3(ω); t = V v, θ = ‖ω‖, evaluated as F0 v + F1 (ω × v) + F2 (ω·v) ω
-        (seed 000 §8.4; equal to seed 001 eq. 36's v + F1 ω × v + F2 ω × (ω × v), which
-        cancels beyond π: ``exp_translation``), as cross products: no 3×3 matrices. On CPU a
-        batch of at least 2^19 runs in 2^16-element chunks (``_batch.in_chunks``: 10^6
-        elements, float32, 39 → 29 ns/element). Rotation angles as in ``SO3.exp``: any θ
-        whose square is finite (float32 θ < 1.8e19), NaN beyond."""
+        q = exp_SO3(ω) as in ``SO3.exp``; t = V(ω) v, θ = ‖ω‖, evaluated as
+        F0 v + F1 (ω × v) + F2 (ω·v) ω (Zhang 2022, §8.4, adapted to ω = θ·axis; equal to
+        Eberly 2024, eq. 36, v + F1 ω × v + F2 ω × (ω × v), which cancels beyond π; see
+        ``exp_translation``), with cross products and no 3×3 matrices. On CPU a batch of at
+        least 2^19 elements runs in 2^16-element chunks (``docs/design/memory-and-chunks.md``).
+
+        Args:
+            tangent: ``(*batch, 6)``, ``(vx, vy, vz, ωx, ωy, ωz)``.
+
+        Returns:
+            SE3 with batch axes ``batch``. Any rotation angle whose square is finite is
+            accepted (float32 θ < 1.8e19, float64 θ < 1.3e154); beyond, the result is NaN.
+        """
         xi = materialize(cls._check_tangent(tangent))
 
         def kernel(compensated: bool, w: jax.Array, v: jax.Array) -> jax.Array:
             half = exp_half_angle(w, compensated)
             if compensated:
-                # With jax 0.12 XLA:CPU recomputed the error-free sums per consumer inside
-                # the chunk loop: 10^6 N(0, 1) tangents took 102-109 ns/element, 25-30 with
-                # this barrier and the one on the compensated dot (jax 0.10.2: 22-28 either way).
+                # Computed once, not once per consumer inside the chunk loop
+                # (docs/design/memory-and-chunks.md).
                 half = materialize(half)
             t = exp_translation(v, w, _KERNEL_FORM, half, compensated)
             return jnp.concatenate([exp_quaternion(w, half), t], axis=-1)
@@ -139,11 +184,12 @@ class SE3(SEBase[SO3]):
 
     @override
     def log(self) -> jax.Array:
-        """Tangent (v, ω), ``(*batch, 6)``, with ‖ω‖ in [0, π].
+        """Principal logarithm: the tangent (v, ω), ``(*batch, 6)``, with ‖ω‖ in [0, π].
 
-        ω = log_SO3(q); v = V⁻¹ t (= t − ½ ω × t + G ω × (ω × t), Barfoot eq. 7.85),
-        evaluated as h t − ½ ω × t + G (ω·t) ω with h = (θ/2)cot(θ/2) and
-        G = (1 − h)/θ² (seed 000 §9: no cancellation near π; ``log_translation``)."""
+        ω = log_SO3(q) as in ``SO3.log``; v = V(ω)⁻¹ t (= t − ½ ω × t + G ω × (ω × t),
+        Barfoot 2017, eq. 7.85), evaluated as h t − ½ ω × t + G (ω·t) ω with
+        h = (θ/2)cot(θ/2) and G = (1 − h)/θ² (Zhang 2022, §9, adapted to ω = θ·axis: no
+        cancellation near π; see ``log_translation``)."""
         p = materialize(self.wxyz_xyz)
         u, s, h = log_quaternion_parts(p[..., :4])
         v = log_translation(p[..., 4:], u, s, h, _KERNEL_FORM)
@@ -165,8 +211,8 @@ class SE3(SEBase[SO3]):
 
     @override
     def adjoint(self) -> jax.Array:
-        """``(*batch, 6, 6)``: [[R, t̂ R], [0, R]] for the (v, ω) ordering (seed 001 eq. 41,
-        permuted)."""
+        """Adjoint ``Ad(T)``, ``(*batch, 6, 6)``: [[R, t̂ R], [0, R]] for the (v, ω) ordering
+        (Eberly 2024, eq. 41, with the blocks permuted to translation first)."""
         R = self.rotation().as_matrix()
         tR = matmul(skew(self.translation()), R)
         zero = jnp.zeros_like(R)

@@ -9,7 +9,10 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import SOBase, aligned, as_float_array, constant, pytree_dataclass, resolve_dtype
+from ._base import SOBase
+from ._checks import as_float_array, resolve_dtype
+from ._pytree import pytree_dataclass
+from ._xla import aligned, constant
 
 
 @pytree_dataclass
@@ -17,7 +20,8 @@ class SO2(SOBase):
     """Special orthogonal group of planar rotations.
 
     Parameters: ``unit_complex = (cos θ, sin θ)``, shape ``(*batch, 2)``.
-    Tangent: ``(θ,)``, shape ``(*batch, 1)``. Matrix: ``[[c, -s], [s, c]]``.
+    Tangent: ``(θ,)``, shape ``(*batch, 1)``. Matrix: ``[[c, -s], [s, c]]``
+    (Eberly 2024, eq. 15).
     """
 
     unit_complex: jax.Array
@@ -28,22 +32,28 @@ class SO2(SOBase):
     tangent_dim = 1
     space_dim = 2
     # Its interpolate fuses into one kernel with no temporaries; chunks would only add the
-    # loop (10^6 elements, 2-core VM: 39 -> 61 ns/element float32, 43 -> 87 float64).
+    # loop (docs/design/memory-and-chunks.md).
     _interpolate_in_chunks = False
 
     # -- factories ------------------------------------------------------------------
 
     @staticmethod
     def from_radians(theta: hints.Scalar) -> SO2:
-        """Rotation by ``theta`` radians; ``theta`` of shape ``batch`` gives that batch."""
+        """Rotation by ``theta`` radians.
+
+        Args:
+            theta: angle, scalar or array of shape ``batch``.
+
+        Returns:
+            SO2 with batch axes ``batch``.
+        """
         theta = as_float_array(theta, "theta", (), "SO2.from_radians")
         return SO2(jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1))
 
     def as_radians(self) -> jax.Array:
         """Angle atan2(sin, cos), shape ``batch``, in [-π, π]: -π only for a rotation by π
         whose stored sine is -0.0 (``from_matrix(-I)`` stores one), as in jaxlie and NumPy.
-        Mapping that -π to π cost SO2 ``log`` 40% at 10³ elements on one core (16 → 23
-        ns/element) and more where XLA then splits the kernel over threads."""
+        Depends on the direction of ``unit_complex`` only."""
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
         return jnp.arctan2(s, c)
 
@@ -75,11 +85,15 @@ class SO2(SOBase):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SO2:
+        """Exponential map: ``(*batch, 1)`` tangent (θ,) -> (cos θ, sin θ)
+        (Eberly 2024, eq. 15); SO2 with batch axes ``batch``."""
         theta = cls._check_tangent(tangent)[..., 0]
         return SO2(jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1))
 
     @override
     def log(self) -> jax.Array:
+        """Principal logarithm: ``(*batch, 1)``, θ = atan2(sin, cos) in [-π, π]
+        (Eberly 2024, §7.2; see ``as_radians``)."""
         return self.as_radians()[..., None]
 
     @classmethod
@@ -122,9 +136,8 @@ class SO2(SOBase):
     @override
     def as_matrix(self) -> jax.Array:
         # Row 0 is (c, −s) = u·(1, −1), row 1 is (s, c) = u reversed: one select between
-        # two broadcast rows. XLA:CPU writes it in 0.5 ns/element at 10^5 (float32, 2-core
-        # VM), against 0.9 for a stack of stacks, whose nested concatenates pick among
-        # four sources per element (RESULTS.md, seventeenth session).
+        # two broadcast rows, instead of nested stacks that pick among four sources per
+        # element.
         u = self.unit_complex
         top = (u * constant([1.0, -1.0], u))[..., None, :]
         row = jax.lax.broadcasted_iota(jnp.int32, (*u.shape[:-1], 2, 2), u.ndim - 1)
@@ -132,8 +145,7 @@ class SO2(SOBase):
 
     @override
     def _matrix_block(self) -> jax.Array:
-        # Inside SE2's matrices a stack fuses better than the select: SE2.as_matrix took
-        # 0.70–0.91x the time with the select (10^3–10^6, float32).
+        # Inside SE2's matrices a stack fuses better than as_matrix's select.
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
         return jnp.stack([jnp.stack([c, -s], -1), jnp.stack([s, c], -1)], -2)
 
@@ -162,6 +174,18 @@ class SO2(SOBase):
         c1, s1 = self.unit_complex[..., 0], self.unit_complex[..., 1]
         c2, s2 = other.unit_complex[..., 0], other.unit_complex[..., 1]
         return SO2(jnp.stack([c1 * c2 - s1 * s2, s1 * c2 + c1 * s2], axis=-1))
+
+    @override
+    def _action_jacobian(self, points: jax.Array) -> jax.Array:
+        # R K(p) = R J p = J R p (plane rotations commute with J = hat(1)): one rotation of
+        # p, read from (c, s), written as a·e₀ + b·e₁ (scalars broadcast onto constant
+        # columns), a form XLA:CPU writes faster than a stack.
+        c, s = self.unit_complex[..., 0, None, None], self.unit_complex[..., 1, None, None]
+        x, y = points[..., 0, None, None], points[..., 1, None, None]
+        e0, e1 = constant([[1.0], [0.0]], x), constant([[0.0], [1.0]], x)
+        col = -(s * x + c * y) * e0 + (c * x - s * y) * e1
+        batch = jnp.broadcast_shapes(self.get_batch_axes(), points.shape[:-1])
+        return jnp.broadcast_to(col, (*batch, 2, 1))
 
     @override
     def inverse(self) -> SO2:

@@ -10,17 +10,11 @@ import numpy as onp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import (
-    SOBase,
-    aligned,
-    as_float_array,
-    constant,
-    materialize,
-    pytree_dataclass,
-    resolve_dtype,
-    static_size,
-)
-from ._scalar import dot, sq_norm
+from ._base import SOBase
+from ._checks import as_float_array, resolve_dtype, static_size
+from ._pytree import pytree_dataclass
+from ._scalar import sq_norm
+from ._xla import aligned, constant, materialize
 
 T = TypeVar("T")
 
@@ -33,7 +27,7 @@ def cross(a: jax.Array, b: jax.Array) -> jax.Array:
 
 
 def skew(w: jax.Array) -> jax.Array:
-    """The matrix ŵ with ŵ v = w × v (seed 001 eq. 26): ``(*batch, 3) -> (*batch, 3, 3)``."""
+    """The matrix ŵ with ŵ v = w × v (Eberly 2024, eq. 26): ``(*batch, 3) -> (*batch, 3, 3)``."""
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
     o = jnp.zeros_like(x)
     return jnp.stack(
@@ -45,7 +39,7 @@ def skew(w: jax.Array) -> jax.Array:
 def exp_quaternion(
     omega: jax.Array, half: Optional[Tuple[jax.Array, jax.Array]] = None
 ) -> jax.Array:
-    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖.
+    """Unit quaternion ``(cos(θ/2), sin(θ/2)/θ · ω)``, θ = ‖ω‖: ``(*batch, 3) -> (*batch, 4)``.
 
     ``half`` = (cos(θ/2), sin(θ/2)/(θ/2)) from ``exp_half_angle`` (pass it to share one
     sincos with the SE(3) translation)."""
@@ -56,10 +50,11 @@ def exp_quaternion(
 def exp_half_angle(
     omega: jax.Array, compensated: bool = True
 ) -> Tuple[jax.Array, jax.Array]:
-    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖. With ``compensated``, θ² is summed as hi + lo
-    so that angles far beyond π keep full accuracy (with a plain θ², 5 ulp at θ ≈ 16);
-    without, it costs what jaxlie's kernel costs and is accurate while θ² ≤
-    ``_scalar.HALF_ANGLE_PLAIN_MAX`` (see ``by_angle``)."""
+    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖, each of shape ``batch`` for ω of ``(*batch, 3)``.
+
+    With ``compensated``, θ² is summed as hi + lo so that angles far beyond π keep full
+    accuracy (with a plain θ², 5 ulp at θ ≈ 16); without, θ² is the plain sum of squares,
+    accurate while θ² ≤ ``_scalar.HALF_ANGLE_PLAIN_MAX`` (see ``by_angle``)."""
     if compensated:
         return _scalar.half_angle(*_scalar.sq_norm_compensated(omega))
     return _scalar.half_angle(sq_norm(omega))
@@ -69,22 +64,29 @@ _BY_ANGLE_MIN_BATCH = 256
 
 
 def by_angle(kernel: Callable[..., T], omega: jax.Array, *args: jax.Array) -> T:
-    """``kernel(compensated, omega, *args)`` with ``compensated = True`` only when some
-    rotation angle ‖ω‖ of the batch exceeds √``HALF_ANGLE_PLAIN_MAX``: the error-free sums
-    that angles far beyond π need (``exp_half_angle``, ``_scalar.dot_compensated``) tripled
-    the work of SO3.exp, and they made XLA:CPU split it into 5 fusions, 3 spread over
-    threads, which at 10³ elements cost 2.5x jaxlie's time. One batch-level ``lax.cond`` on
-    CPU for batches of at least ``_BY_ANGLE_MIN_BATCH`` elements (static shapes: under
-    ``vmap`` the function sees one element; a symbolic batch, ``jax.export``, counts as
-    large); smaller batches, where the cond's dispatch
-    costs more than it saves, and other backends (GPU: a cond would stall on the
-    predicate) always take the compensated kernel.
+    """``kernel(compensated, omega, *args)``, with the error-free (compensated) sums only
+    where the batch needs them.
 
-    Derivatives (a custom JVP) always differentiate the compensated kernel: the two
-    kernels have the same derivative formulas, and differentiating through the cond made
-    XLA compile and transpose both branches (SO3 grad compile 1.3 s against 0.65 s).
-    Every array the kernel depends on must be passed in ``omega``/``args``, not closed
-    over, so that its derivative is not lost."""
+    Angles far beyond π need the compensated θ² and dot products (``exp_half_angle``,
+    ``_scalar.dot_compensated``); the plain kernel is as accurate while every rotation
+    angle ‖ω‖ of the batch is at most √``HALF_ANGLE_PLAIN_MAX``. On CPU, for batches of at
+    least ``_BY_ANGLE_MIN_BATCH`` elements, one batch-level ``lax.cond`` picks the kernel
+    (static shapes: under ``vmap`` the function sees one element; a symbolic batch, as in
+    ``jax.export``, counts as large). Smaller batches and other backends always take the
+    compensated kernel. Why, and what the cond costs: ``docs/design/compile-time.md``.
+
+    Derivatives (a custom JVP) always differentiate the compensated kernel: both kernels
+    have the same derivative formulas, and the cond itself is never differentiated.
+
+    Args:
+        kernel: ``kernel(compensated: bool, omega, *args)``, returning any pytree.
+        omega: ``(*batch, 3)`` rotation vectors whose angles decide.
+        *args: further arrays the kernel reads. Every array the kernel depends on must be
+            passed in ``omega``/``args``, not closed over, so that its derivative is not
+            lost.
+
+    Returns:
+        The kernel's result."""
     n = static_size(omega.shape[:-1])
     if n is not None and n < _BY_ANGLE_MIN_BATCH:
         return kernel(True, omega, *args)
@@ -107,11 +109,11 @@ def by_angle(kernel: Callable[..., T], omega: jax.Array, *args: jax.Array) -> T:
 
 
 def log_quaternion(wxyz: jax.Array) -> jax.Array:
-    """Principal log of a (not necessarily unit; see ``_scalar.atan2_over`` for the range of
-    norms) quaternion: ω = 2 atan2(‖v‖, w)/‖v‖ · v
-    after the sign choice w ≥ 0, so the angle is in [0, π]. The quaternion atan2 form is
-    accurate up to and at π (no acos, no snapping); at w = 0 exactly (angle π) the stored
-    vector part gives the axis."""
+    """Principal log of a quaternion ``(*batch, 4) -> (*batch, 3)``: ω = 2 atan2(‖v‖, w)/‖v‖ · v
+    after the sign choice w ≥ 0, so the angle is in [0, π]. The quaternion need not be
+    unit (see ``_scalar.atan2_over`` for the range of norms). The atan2 form is accurate up
+    to and at π (no acos, no snapping); at w = 0 exactly (angle π) the stored vector part
+    gives the axis."""
     u, s, _ = log_quaternion_parts(wxyz)
     return s[..., None] * u
 
@@ -213,7 +215,7 @@ def skew_sq(w: jax.Array) -> jax.Array:
 
 def jac_right_so3(omega: jax.Array) -> jax.Array:
     """Right Jacobian of SO(3), J_r(ω) = I − F1(θ²) ω̂ + F2(θ²) ω̂² (Solà et al. 2018,
-    eq. 143; seed 001's F1, F2): ``(*batch, 3) -> (*batch, 3, 3)``."""
+    eq. 143; F1, F2 as in Eberly 2024, eq. 42): ``(*batch, 3) -> (*batch, 3, 3)``."""
     x = sq_norm(omega)
     eye = constant(onp.eye(3), omega[..., None])
     return (
@@ -231,12 +233,12 @@ def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
 
 
 def jlog_so3(omega: jax.Array) -> jax.Array:
-    """J_r⁻¹(ω) for a principal ω (θ ≤ π, a log's output) as h I + ½ ω̂ + G ω ωᵀ, with
-    G = ``G_principal``(θ²) and h = 1 − θ² G (ω̂² = ω ωᵀ − θ² I), written entry by entry.
-    Measured at 10^5 in float32 (2 cores), against 43.7 ns/element for jax.jacfwd: the
-    I + ½ ω̂ + G ω̂² sum of ``jac_right_inv_so3`` took 22.8 ns, 14.4 with G's series alone,
-    8.8 with the entries stacked. (The stacked form made ``jac_right_so3`` slower, 12 →
-    27 ns, so the general Jacobians keep the sum.)"""
+    """J_r⁻¹(ω) for a principal ω (θ ≤ π, a log's output): ``(*batch, 3) -> (*batch, 3, 3)``.
+
+    Evaluated as h I + ½ ω̂ + G ω ωᵀ, with G = ``G_principal``(θ²) and h = 1 − θ² G
+    (ω̂² = ω ωᵀ − θ² I), written entry by entry; the same matrix as
+    ``jac_right_inv_so3(omega)`` (Solà et al. 2018, eq. 144) on the principal range. Speed
+    against ``jax.jacfwd``: ``benchmarks/jacobians.py``."""
     x = sq_norm(omega)
     g = _scalar.G_principal(x)
     h = 1.0 - x * g
@@ -257,7 +259,8 @@ class SO3(SOBase):
 
     Parameters: ``wxyz``, a unit quaternion ``(qw, qx, qy, qz)``, shape ``(*batch, 4)``
     (Hamilton convention; q and −q are the same rotation, and no operation flips the
-    sign implicitly). Tangent: ``(ωx, ωy, ωz)``, the rotation vector, shape ``(*batch, 3)``.
+    sign implicitly). Tangent: ``(ωx, ωy, ωz)``, the rotation vector (axis times angle),
+    shape ``(*batch, 3)``. Matrix: the 3×3 rotation R(q), acting on column vectors.
     """
 
     wxyz: jax.Array
@@ -280,31 +283,57 @@ class SO3(SOBase):
 
     @staticmethod
     def from_x_radians(theta: hints.Scalar) -> SO3:
-        """Rotation by ``theta`` about x; ``theta`` of shape ``batch``."""
+        """Rotation by ``theta`` radians about the x axis.
+
+        Args:
+            theta: angle, scalar or array of shape ``batch``.
+
+        Returns:
+            SO3 with batch axes ``batch``.
+        """
         return SO3._about_axis(theta, 0, "SO3.from_x_radians")
 
     @staticmethod
     def from_y_radians(theta: hints.Scalar) -> SO3:
-        """Rotation by ``theta`` about y; ``theta`` of shape ``batch``."""
+        """Rotation by ``theta`` radians about the y axis (``theta`` as in
+        ``from_x_radians``)."""
         return SO3._about_axis(theta, 1, "SO3.from_y_radians")
 
     @staticmethod
     def from_z_radians(theta: hints.Scalar) -> SO3:
-        """Rotation by ``theta`` about z; ``theta`` of shape ``batch``."""
+        """Rotation by ``theta`` radians about the z axis (``theta`` as in
+        ``from_x_radians``)."""
         return SO3._about_axis(theta, 2, "SO3.from_z_radians")
 
     @staticmethod
     def from_rpy_radians(roll: hints.Scalar, pitch: hints.Scalar, yaw: hints.Scalar) -> SO3:
-        """From ZYX Euler angles (mobile-robot convention):
-        ``Rz(yaw) @ Ry(pitch) @ Rx(roll)``, roll applied first. The three angles are
-        scalars or arrays that broadcast to the batch shape."""
+        """Rotation from ZYX Euler angles (mobile-robot convention):
+        ``Rz(yaw) @ Ry(pitch) @ Rx(roll)``, roll applied first.
+
+        Args:
+            roll: rotation about x, radians.
+            pitch: rotation about y, radians.
+            yaw: rotation about z, radians. The three are scalars or arrays that broadcast
+                to a common batch shape.
+
+        Returns:
+            SO3 with that batch shape.
+        """
         return (
             SO3.from_z_radians(yaw) @ SO3.from_y_radians(pitch) @ SO3.from_x_radians(roll)
         )
 
     @staticmethod
     def from_quaternion_xyzw(xyzw: hints.Array) -> SO3:
-        """From an ``(x, y, z, w)`` quaternion, shape ``(*batch, 4)``; sign kept."""
+        """Rotation from a quaternion stored scalar-last.
+
+        Args:
+            xyzw: ``(*batch, 4)``, ``(x, y, z, w)``; reordered to ``wxyz``, sign and norm
+                kept.
+
+        Returns:
+            SO3 with batch axes ``batch``.
+        """
         xyzw = as_float_array(xyzw, "xyzw", (4,), "SO3.from_quaternion_xyzw")
         return SO3(jnp.roll(xyzw, shift=1, axis=-1))
 
@@ -347,9 +376,9 @@ class SO3(SOBase):
     @classmethod
     @override
     def from_matrix(cls, matrix: hints.Array) -> SO3:
-        """``(*batch, 3, 3)`` rotation matrix -> SO3 of batch ``batch``.
+        """Rotation from a ``(*batch, 3, 3)`` rotation matrix; SO3 with batch axes ``batch``.
 
-        Quaternion by Shepperd's pivoting: of the four
+        Quaternion by Shepperd's pivoting (Shepperd 1978): of the four
         expressions 4w², 4x², 4y², 4z² (from the trace and the diagonal), the largest is
         square-rooted, the other three components come from off-diagonal sums or
         differences divided by it. Accurate at every angle, π included; one sqrt.
@@ -413,19 +442,33 @@ class SO3(SOBase):
     @classmethod
     @override
     def exp(cls, tangent: hints.Array) -> SO3:
-        """``(*batch, 3)`` tangent ω -> SO3 of batch ``batch``.
+        """Exponential map of the rotation vector ω.
 
-        q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖ (seed 002's Rodrigues form, in
-        quaternions), both coefficients from ``_scalar.half_angle`` (closed forms with an
-        exact custom JVP; θ² compensated when the batch holds an angle beyond √10, see
-        ``by_angle``). Any angle whose square is finite (θ < 1.8e19 in float32, 1.3e154 in
-        float64; beyond, θ² overflows and the result is NaN, as jaxlie's is); for θ > π the
-        result has w < 0 (it is not re-signed)."""
+        q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖: Rodrigues' formula
+        R = I + F0 ω̂ + F1 ω̂² (Eberly 2024, eq. 27) in quaternion form. Both coefficients
+        come from ``_scalar.half_angle`` (closed forms with an exact custom JVP; θ²
+        compensated when the batch holds an angle beyond √10, see ``by_angle``).
+
+        Args:
+            tangent: ``(*batch, 3)``, ``(ωx, ωy, ωz)``.
+
+        Returns:
+            SO3 with batch axes ``batch``. Any angle whose square is finite is accepted
+            (θ < 1.8e19 in float32, 1.3e154 in float64; beyond, θ² overflows and the result
+            is NaN, as jaxlie's is). For θ > π the result has w < 0 (it is not re-signed).
+        """
         w = materialize(cls._check_tangent(tangent))
         return SO3(by_angle(lambda comp, w: exp_quaternion(w, exp_half_angle(w, comp)), w))
 
     @override
     def log(self) -> jax.Array:
+        """Principal logarithm: the rotation vector ω, ``(*batch, 3)``, with ‖ω‖ in [0, π].
+
+        With the sign of q chosen so that w ≥ 0 and u its vector part,
+        ω = 2 atan2(‖u‖, w)/‖u‖ · u (``log_quaternion``). Unlike the trace/acos form
+        (Eberly 2024, §9.2), which loses about √ε in the angle near π, it is accurate up to
+        and at π; at exactly π (w = 0) the stored vector part decides the sign of ω. It
+        depends on q's direction only (a drifted, non-unit q gives the log of q/|q|)."""
         return log_quaternion(materialize(self.wxyz))
 
     @override

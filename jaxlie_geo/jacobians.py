@@ -1,27 +1,30 @@
 """Jacobians of the group operations with respect to right perturbations.
 
-Convention (Solà, Deray, Atchuthan, *A micro Lie theory for state estimation in
-robotics*, 2018, §III–IV): for f: G → H,
+Convention (Solà, Deray and Atchuthan, *A micro Lie theory for state estimation in
+robotics*, 2018, §III): for f: G → H, the right Jacobian
 
-    J = d f(X)⁻¹ f(X ⊕ δ) / dδ  at δ = 0,   X ⊕ δ = X @ exp(δ),
+    J = ∂ log(f(X)⁻¹ f(X ⊕ δ)) / ∂δ  at δ = 0,   X ⊕ δ = X @ exp(δ),
 
 so that ``f(X ⊕ δ) ≈ f(X) ⊕ J δ``. Points are perturbed additively. A function of two
 arguments returns a tuple of two Jacobians, in argument order; one of a single element or
 tangent (``inverse``, ``exp``, ``log``, ``generator_action``) returns one array. The
 arguments' batch axes broadcast; shapes ``(*batch, out_dim, in_dim)``, k = ``tangent_dim``.
 
-=================  ====================================  ==========================
-operation          value                                 Jacobians (eq. in Solà)
-=================  ====================================  ==========================
-compose(a, b)      a @ b                                 Ad(b⁻¹), I        (173, 174)
-inverse(a)         a⁻¹                                   −Ad(a)            (160)
-apply(T, p)        T @ p                                 R K(p), R         (166, 181)
-between(a, b)      a⁻¹ @ b                               −Ad(b⁻¹a), I
-rminus(a, b)       log(a⁻¹ b) = b ⊖ a                    −J_l⁻¹(τ), J_r⁻¹(τ)  (176)
-rplus(a, δ)        a @ exp(δ)                            Ad(exp(−δ)), J_r(δ)  (175)
-exp(x)             exp(x)                                J_r(x)            (143)
-log(a)             log(a)                                J_r⁻¹(log a)      (144)
-=================  ====================================  ==========================
+| operation     | value              | Jacobians           |
+|---------------|--------------------|---------------------|
+| compose(a, b) | a @ b              | Ad(b⁻¹), I          |
+| inverse(a)    | a⁻¹                | −Ad(a)              |
+| apply(T, p)   | T @ p              | R K(p), R           |
+| between(a, b) | a⁻¹ @ b            | −Ad(b⁻¹a), I        |
+| rminus(a, b)  | log(a⁻¹ b) = b ⊖ a | −J_l⁻¹(τ), J_r⁻¹(τ) |
+| rplus(a, δ)   | a @ exp(δ)         | Ad(exp(−δ)), J_r(δ) |
+| exp(x)        | exp(x)             | J_r(x)              |
+| log(a)        | log(a)             | J_r⁻¹(log a)        |
+
+These are Solà et al.'s elementary Jacobian blocks (2018, §III), written once for every
+group through ``adjoint``, ``jac_right`` and ``jac_right_inv``; the groups' closed forms of
+J_r and J_r⁻¹ are, for example, eqs. 143–144 of the same paper for SO(3) and eq. 163 for
+SE(2). τ = log(a⁻¹ b), and J_l(τ) = J_r(−τ).
 
 K(p) is the generators' action on the point: column i is the first ``space_dim`` entries
 of ``hat(eᵢ) p̃`` (p̃ = (p, 1) for SE groups), e.g. [I, −p̂] for SE(3), −p̂ for SO(3).
@@ -29,17 +32,16 @@ of ``hat(eᵢ) p̃`` (p̃ = (p, 1) for SE groups), e.g. [I, −p̂] for SE(3), �
 
 from __future__ import annotations
 
-from typing import Sequence, Tuple, Type, TypeVar
+from typing import Tuple, Type
 
 import jax
 import jax.numpy as jnp
-import numpy as onp
 
 from . import hints
-from ._base import MatrixLieGroup, SEBase, aligned, as_float_array, check_batches, constant, jit_function
-from ._so2 import SO2
-
-GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+from ._base import GroupT, MatrixLieGroup, SEBase
+from ._checks import as_float_array, check_batches
+from ._jit import jit_function
+from ._xla import aligned
 
 
 def _eye_like(T: MatrixLieGroup) -> jax.Array:
@@ -59,30 +61,59 @@ def _broadcast(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
 
 @jit_function()
 def compose(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
-    """Jacobians of ``a @ b`` w.r.t. ``a`` and ``b``: ``(Ad(b⁻¹), I)``, each
-    ``(*batch, k, k)``, batch the broadcast of ``a``'s and ``b``'s."""
+    """Jacobians of ``a @ b`` with respect to ``a`` and ``b``.
+
+    Args:
+        a: element of any group.
+        b: element of the same group; batch axes broadcast with ``a``'s.
+
+    Returns:
+        ``(Ad(b⁻¹), I)``, each ``(*batch, k, k)``, ``batch`` the broadcast batch axes.
+    """
     return _broadcast(b.inverse().adjoint(), _eye_like(a.multiply(b)))
 
 
 @jit_function()
 def inverse(a: GroupT) -> jax.Array:
-    """Jacobian of ``a⁻¹`` w.r.t. ``a``: ``−Ad(a)``, ``(*batch, k, k)``."""
+    """Jacobian of ``a⁻¹`` with respect to ``a``.
+
+    Args:
+        a: element with batch axes ``batch``.
+
+    Returns:
+        ``−Ad(a)``, ``(*batch, k, k)``.
+    """
     return -a.adjoint()
 
 
 @jit_function()
 def between(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
-    """Jacobians of ``a⁻¹ @ b`` w.r.t. ``a`` and ``b``: ``(−Ad(b⁻¹ a), I)``, each
-    ``(*batch, k, k)``, batch the broadcast of ``a``'s and ``b``'s."""
+    """Jacobians of ``a⁻¹ @ b`` with respect to ``a`` and ``b``.
+
+    Args:
+        a: element of any group.
+        b: element of the same group; batch axes broadcast with ``a``'s.
+
+    Returns:
+        ``(−Ad(b⁻¹ a), I)``, each ``(*batch, k, k)``, ``batch`` the broadcast batch axes.
+    """
     return _broadcast(-b._between(a).adjoint(), _eye_like(a._between(b)))
 
 
 @jit_function()
 def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     """Jacobians of ``τ = log(a⁻¹ @ b)`` (the pose-graph residual, ``manifold.rminus``)
-    w.r.t. ``a`` and ``b``: ``(−J_l⁻¹(τ), J_r⁻¹(τ))``, each ``(*batch, k, k)``. SO3 at
-    10^5 (float32, 2 cores): 42–50 ns/element through ``jac_left_inv``/``jac_right_inv``,
-    17–22 through ``jlog`` and J_l⁻¹ = J_r⁻¹ᵀ."""
+    with respect to ``a`` and ``b``.
+
+    Args:
+        a: element of any group.
+        b: element of the same group; batch axes broadcast with ``a``'s.
+
+    Returns:
+        ``(−J_l⁻¹(τ), J_r⁻¹(τ))``, each ``(*batch, k, k)``, ``batch`` the broadcast batch
+        axes. J_r⁻¹(τ) is ``jlog`` of ``a⁻¹ b`` (the log is principal), and for rotation
+        groups J_l⁻¹ = J_r⁻¹ᵀ.
+    """
     G = type(a)
     e = a._between(b)
     J_r_inv = e.jlog()  # the log is principal: the groups' faster jlog applies
@@ -93,8 +124,19 @@ def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
 
 @jit_function()
 def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
-    """Jacobians of ``a @ exp(δ)`` w.r.t. ``a`` and ``δ`` (``(*batch, k)``):
-    ``(Ad(exp(−δ)), J_r(δ))``, each ``(*batch, k, k)``, batch the broadcast of both."""
+    """Jacobians of ``a @ exp(δ)`` with respect to ``a`` and ``δ``.
+
+    Args:
+        a: element of any group.
+        delta: ``(*batch', k)`` tangent δ; batch axes broadcast with ``a``'s.
+
+    Returns:
+        ``(Ad(exp(−δ)), J_r(δ))``, each ``(*batch, k, k)``, ``batch`` the broadcast batch
+        axes.
+
+    Raises:
+        ValueError: the batch axes of ``a`` and ``delta`` do not broadcast.
+    """
     G = type(a)
     delta = G._check_tangent(delta, "jacobians.rplus", like=a.parameters(), name="delta")
     check_batches("jacobians.rplus", "batch axes of the element and `delta`",
@@ -106,101 +148,80 @@ def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
 
 @jit_function("G")
 def exp(G: Type[MatrixLieGroup], tangent: hints.Array) -> jax.Array:
-    """Jacobian of ``G.exp`` at ``tangent`` (``(*batch, k)``): the right Jacobian ``J_r``,
-    ``(*batch, k, k)``."""
+    """Jacobian of ``G.exp`` at ``tangent``: the right Jacobian ``J_r``.
+
+    Args:
+        G: the group class, e.g. ``SE3``.
+        tangent: ``(*batch, k)``.
+
+    Returns:
+        ``G.jac_right(tangent)``, ``(*batch, k, k)``.
+    """
     return G.jac_right(tangent)
 
 
 @jit_function()
 def log(a: MatrixLieGroup) -> jax.Array:
-    """Jacobian of ``a.log()`` w.r.t. ``a``: ``J_r⁻¹(log a)`` (= ``a.jlog()``),
-    ``(*batch, k, k)``."""
+    """Jacobian of ``a.log()`` with respect to ``a``.
+
+    Args:
+        a: element with batch axes ``batch``.
+
+    Returns:
+        ``J_r⁻¹(log a)`` (= ``a.jlog()``), ``(*batch, k, k)``.
+    """
     return a.jlog()
-
-
-def _generators(G: Type[MatrixLieGroup]) -> onp.ndarray:
-    """The generators hat(eᵢ) as a NumPy constant ``(k, n, n)`` (entries 0 and ±1)."""
-    with jax.ensure_compile_time_eval():
-        return onp.asarray(G.hat(onp.eye(G.tangent_dim)))
-
-
-def _combine(coeffs: onp.ndarray, xs: Sequence[jax.Array]) -> jax.Array:
-    """Σ_l coeffs[l] · xs[l] for a constant coefficient vector, skipping zeros."""
-    terms = [c * x for c, x in zip(coeffs.tolist(), xs) if c != 0.0]
-    if not terms:
-        return jnp.zeros_like(xs[0])
-    out = terms[0]
-    for t in terms[1:]:
-        out = out + t
-    return out
-
-
-def _matmul(A: jax.Array, B: jax.Array) -> jax.Array:
-    """(..., m, n) @ (..., n, k) for small m, n, k, written out elementwise: a batched
-    3×3 ``dot`` on XLA:CPU costs several times the fused multiply-adds."""
-    n = A.shape[-1]
-    rows = []
-    for i in range(A.shape[-2]):
-        row = []
-        for j in range(B.shape[-1]):
-            acc = A[..., i, 0] * B[..., 0, j]
-            for m in range(1, n):
-                acc = acc + A[..., i, m] * B[..., m, j]
-            row.append(acc)
-        rows.append(jnp.stack(row, axis=-1))
-    return jnp.stack(rows, axis=-2)
 
 
 @jit_function("G")
 def generator_action(G: Type[MatrixLieGroup], points: hints.Array) -> jax.Array:
-    """K(p): ``d (hat(δ) p̃)[:space_dim] / dδ``, shape ``(*batch, space_dim, tangent_dim)``
+    """The generators' action on points, K(p) = ``d (hat(δ) p̃)[:space_dim] / dδ``
     (p̃ = (p, 1) for SE groups): e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3). Entry (i, j)
-    is Σ_l hat(e_j)[i, l] p̃_l, written out from the constant generators."""
-    n, d = G.matrix_dim, G.space_dim
-    p = as_float_array(points, "points", (d,), "jacobians.generator_action")
-    coords = [p[..., l] for l in range(d)]
-    if n > d:  # homogeneous coordinates
-        coords.append(jnp.ones_like(coords[0]))
-    E = _generators(G)
-    return jnp.stack(
-        [jnp.stack([_combine(E[j, i], coords) for j in range(G.tangent_dim)], -1) for i in range(d)],
-        axis=-2,
-    )
+    is Σ_l hat(e_j)[i, l] p̃_l.
 
+    Args:
+        G: the group class.
+        points: ``(*batch, space_dim)``.
 
-_E0, _E1 = onp.array([[1.0], [0.0]]), onp.array([[0.0], [1.0]])
-"""The columns e₀, e₁ as ``(2, 1)`` constants (SO(2)'s ``apply`` Jacobian)."""
+    Returns:
+        ``(*batch, space_dim, tangent_dim)``.
+    """
+    p = as_float_array(points, "points", (G.space_dim,), "jacobians.generator_action")
+    return G._generator_action(p)
 
 
 @jit_function()
 def apply(T: GroupT, points: hints.Array) -> Tuple[jax.Array, jax.Array]:
-    """Jacobians of ``T @ p`` w.r.t. ``T`` (right perturbation) and ``p``:
-    ``(R K(p), R)`` with R the rotation matrix; shapes ``(*batch, space_dim, tangent_dim)``
-    and ``(*batch, space_dim, space_dim)``."""
+    """Jacobians of ``T @ p`` with respect to ``T`` (right perturbation) and ``p``.
+
+    Args:
+        T: element of any group.
+        points: ``(*batch', space_dim)``; batch axes broadcast with ``T``'s.
+
+    Returns:
+        ``(R K(p), R)`` with R the rotation matrix (``generator_action`` for K), of shapes
+        ``(*batch, space_dim, tangent_dim)`` and ``(*batch, space_dim, space_dim)``.
+    """
     return _apply(T, points, "jacobians.apply")
 
 
 def _apply(T: GroupT, points: hints.Array, where: str) -> Tuple[jax.Array, jax.Array]:
     """``apply``'s body; errors about ``points`` name ``where``."""
     T, p = aligned(T, T._check_points(points, where, "points"))
-    R = T.rotation()._matrix_block() if isinstance(T, SEBase) else T.as_matrix()
+    R = T._linear_part()
     R = R.astype(jnp.result_type(R, p))
     batch = jnp.broadcast_shapes(R.shape[:-2], p.shape[:-1])
-    R = jnp.broadcast_to(R, (*batch, *R.shape[-2:]))
-    if isinstance(T, SO2):
-        # R K(p) = R J p = J R p (plane rotations commute with J = hat(1)): one rotation of
-        # p, read from (c, s), not from R, and written as a·e₀ + b·e₁ (scalars broadcast
-        # onto constant columns) rather than a stack, which XLA:CPU writes more slowly.
-        # benchmarks/jacobians.py, 10^5 elements, float32, 2-core VM, ratio to jacfwd: a
-        # stack from R 0.90, from (c, s) 1.05–1.18, this form 1.55–2.06 with R stacked and
-        # 1.99–3.04 with SO2.as_matrix's select (RESULTS.md).
-        c, s = T.unit_complex[..., 0, None, None], T.unit_complex[..., 1, None, None]
-        pp = p.astype(R.dtype)
-        x, y = pp[..., 0, None, None], pp[..., 1, None, None]
-        col = -(s * x + c * y) * constant(_E0, x) + (c * x - s * y) * constant(_E1, x)
-        return jnp.broadcast_to(col, (*batch, 2, 1)), R
-    K = generator_action(type(T), jnp.broadcast_to(p.astype(R.dtype), (*batch, p.shape[-1])))
-    return _matmul(R, K), R
+    return T._action_jacobian(p.astype(R.dtype)), jnp.broadcast_to(R, (*batch, *R.shape[-2:]))
 
 
-__all__ = ["compose", "inverse", "apply", "between", "rminus", "rplus", "exp", "log", "generator_action"]
+__all__ = [
+    "compose",
+    "inverse",
+    "apply",
+    "between",
+    "rminus",
+    "rplus",
+    "exp",
+    "log",
+    "generator_action",
+]

@@ -12,7 +12,8 @@ from typing import Any, Callable, Sequence, TypeVar, Union
 import jax
 import jax.numpy as jnp
 
-from ._base import MatrixLieGroup, check_elements
+from ._base import MatrixLieGroup
+from ._checks import check_elements
 
 TangentPytree = Any
 """The pytree of tangents of a pytree of elements (arrays in place of groups)."""
@@ -36,9 +37,15 @@ def _map(f_group: Callable[..., Any], f_array: Callable[..., Any], tree: Any, *r
 def rplus(transform: _PytreeT, delta: TangentPytree) -> _PytreeT:
     """Right plus, ``T ⊕ δ = T @ exp(δ)`` for each group leaf, ``x + δ`` for arrays.
 
-    ``delta`` has ``transform``'s tree structure, with a ``(*batch, tangent_dim)`` array
-    in place of each element (batch axes broadcast); integer increments take the
-    element's dtype."""
+    Args:
+        transform: a group element, or a pytree of elements and arrays.
+        delta: ``transform``'s tree structure, with a ``(*batch, tangent_dim)`` array in
+            place of each element (batch axes broadcast); integer increments take the
+            element's dtype.
+
+    Returns:
+        A pytree of ``transform``'s structure.
+    """
     def plus(T: Any, d: Any) -> Any:
         d = T._check_tangent(d, "manifold.rplus", like=T.parameters(), name="delta")
         return T.multiply(type(T).exp(d))
@@ -47,10 +54,17 @@ def rplus(transform: _PytreeT, delta: TangentPytree) -> _PytreeT:
 
 
 def rminus(a: Any, b: Any) -> TangentPytree:
-    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays: a
-    pytree of ``a``'s structure with a ``(*batch, tangent_dim)`` array per element; δ
-    satisfies ``rplus(a, δ) = b`` for every leaf. (jaxlie 1.5 takes the same
-    argument order for groups but returns ``a − b`` for array leaves.)"""
+    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays.
+
+    Args:
+        a: a group element, or a pytree of elements and arrays.
+        b: a pytree of the same structure and groups.
+
+    Returns:
+        A pytree δ of ``a``'s structure with a ``(*batch, tangent_dim)`` array per element,
+        the principal log, so that ``rplus(a, δ) = b`` for every leaf. (jaxlie 1.5 takes
+        the same argument order for groups but returns ``a − b`` for array leaves.)
+    """
     return _map(lambda A, B: A._between(B).log(), lambda x, y: y - x, a, b)
 
 

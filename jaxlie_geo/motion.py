@@ -1,5 +1,6 @@
-"""Motion at constant body velocity (seed 000, Zhang, *A Geometric Introduction to Lie
-Theory*, §5–§9; seed 002's time-scaled logarithm).
+"""Motion at constant body velocity (Zhang, *A Geometric Introduction to Lie Theory*, 2022,
+§3–§9; the time-scaled logarithm ω = ln_τ R, the angular velocity that turns the identity
+into R in time τ).
 
 A body moving with constant *local* (body-frame) linear and angular velocity ``ξ`` —
 ``(vx, vy, ω)`` for SE(2), ``(v, ω)`` for SE(3), ``ω`` for SO(3) — follows
@@ -13,17 +14,17 @@ circular arc of signed curvature ω/|v| (a line when ω = 0); in space, a helix.
 
 from __future__ import annotations
 
-from typing import TypeVar
-
 import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import MatrixLieGroup, aligned, as_float_array, check_batches, jit_function, pytree_dataclass
+from ._base import GroupT
+from ._checks import as_float_array, check_batches
 from ._geodesic import Geodesic
+from ._jit import jit_function
+from ._pytree import pytree_dataclass
 from ._se2 import SE2
-
-GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+from ._xla import aligned
 
 
 def velocity_between(start: GroupT, end: GroupT, duration: hints.Scalar) -> jax.Array:
@@ -34,13 +35,20 @@ def velocity_between(start: GroupT, end: GroupT, duration: hints.Scalar) -> jax.
     around twice) give the velocity directly to ``pose_at``.
 
     Args:
-        start, end: elements of one group; batch axes broadcast.
+        start: element of a group; batch axes broadcast with ``end``'s.
+        end: element of the same group.
         duration: non-zero scalar or array broadcasting with the batch axes; a negative
             duration runs the path backwards. A concrete zero raises ``ValueError``; a traced
             zero gives inf/NaN, as any division by zero.
+
     Returns:
         ``(*batch, tangent_dim)``: velocity per unit time in ``start``'s body frame.
-        ``velocity_between(identity, R, τ)`` is seed 002's time-scaled log ln_τ R.
+        ``velocity_between(identity, R, τ)`` is the time-scaled logarithm ln_τ R, the ω
+        with exp(ω̂ τ) = R.
+
+    Raises:
+        TypeError: ``start`` and ``end`` are not the same group.
+        ValueError: ``duration`` is a concrete zero, or the batch axes do not broadcast.
     """
     if type(start) is not type(end):
         raise TypeError(
@@ -68,6 +76,10 @@ def pose_at(start: GroupT, velocity: hints.Array, t: hints.Scalar) -> GroupT:
             followed, not wrapped).
         t: scalar or array; broadcasts numpy-style against the batch axes, as in
             ``interpolate`` (a batch of times on one body: ``t`` of shape (K,)).
+
+    Returns:
+        Element of ``start``'s group, batch the broadcast of ``B``, ``B'`` and ``t``'s
+        shape (numpy-style, as ``interpolate``).
     """
     G = type(start)
     velocity = G._check_tangent(
@@ -110,8 +122,8 @@ class Arc:
 @jit_function()
 def arc(start: SE2, velocity: hints.Array) -> Arc:
     """The circle (or line) traced by an SE(2) body with constant body velocity
-    ``(vx, vy, ω)`` (seed 000 §5.1–5.4, with the chord written AB = (R − I)·OA, not the
-    seed's (I − R)·OA).
+    ``(vx, vy, ω)`` (Zhang 2022, §5.1–5.4, with the chord AB = (R − I)·OA; the text's
+    (I − R)·OA is a sign slip).
 
     Geometry: the world-frame velocity is u = R₀ v; the body turns about the centre
     c = p₀ + J u/ω (J = 90° rotation), with radius |v|/|ω|; after time t it has turned by
@@ -127,7 +139,9 @@ def arc(start: SE2, velocity: hints.Array) -> Arc:
     if not isinstance(start, SE2):
         raise TypeError(f"arc: `start` must be SE2, got {type(start).__name__}.")
     xi = SE2._check_tangent(velocity, "motion.arc", like=start.parameters(), name="velocity")
-    check_batches("arc", "batch axes of `start` and `velocity`", start.get_batch_axes(), xi.shape[:-1])
+    check_batches(
+        "arc", "batch axes of `start` and `velocity`", start.get_batch_axes(), xi.shape[:-1]
+    )
     v, omega = xi[..., :2], xi[..., 2]
     u = start.rotation().apply(v)
     p0 = start.translation()

@@ -5,27 +5,23 @@ Convention: an uncertain element is ``T̄ @ exp(δ)``, ``δ ~ N(0, Σ)``, with �
 ``(*batch, k, k)`` in the tangent's own order — ``(v, ω)`` for SE(3), ``(vx, vy, θ)`` for
 SE(2). GTSAM orders SE(3) covariances ``(ω, v)``: permute blocks when exchanging them.
 Propagation is first order through the Jacobians of ``jaxlie_geo.jacobians``
-(Barfoot & Furgale 2014, §III; Solà et al. 2018, §IV-C).
+(Barfoot and Furgale, *Associating uncertainty with three-dimensional poses for use in
+estimation problems*, 2014, §III; Solà et al. 2018, §IV-C). Barfoot and Furgale perturb on
+the left, ``exp(δ) @ T̄``; their covariances map to these by δ_left = Ad(T̄) δ_right.
 """
 
 from __future__ import annotations
 
-from typing import Any, Optional, Tuple, TypeVar
+from typing import Any, Optional, Tuple
 
 import jax
 import jax.numpy as jnp
 
 from . import hints, jacobians
-from ._base import (
-    MatrixLieGroup,
-    as_float_array,
-    check_batches,
-    jit_function,
-    matmul,
-    resolve_dtype,
-)
-
-GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
+from ._base import GroupT, MatrixLieGroup
+from ._checks import as_float_array, check_batches, resolve_dtype
+from ._jit import jit_function
+from ._xla import matmul
 
 
 def _sandwich(J: jax.Array, cov: jax.Array) -> jax.Array:
@@ -59,10 +55,21 @@ def propagate_compose(
     cov_b: hints.Array,
     cov_ab: Optional[hints.Array] = None,
 ) -> jax.Array:
-    """Covariance of ``a @ b``: ``J_a Σ_a J_aᵀ + J_b Σ_b J_bᵀ + J_a Σ_ab J_bᵀ + (…)ᵀ`` with
-    ``J_a = Ad(b⁻¹)``, ``J_b = I``. ``cov_ab`` = E[δ_a δ_bᵀ] for correlated operands
-    (default: independent). Σ_a, Σ_b, Σ_ab: ``(*batch, k, k)``, batch axes broadcasting
-    with the elements'; returns ``(*batch, k, k)``."""
+    """Covariance of ``a @ b``, to first order:
+    ``J_a Σ_a J_aᵀ + J_b Σ_b J_bᵀ + J_a Σ_ab J_bᵀ + (J_a Σ_ab J_bᵀ)ᵀ`` with
+    ``J_a = Ad(b⁻¹)``, ``J_b = I`` (``jacobians.compose``).
+
+    Args:
+        a: element of any group.
+        cov_a: Σ_a, ``(*batch, k, k)``, the covariance of ``a``'s right perturbation.
+        b: element of the same group.
+        cov_b: Σ_b, ``(*batch, k, k)``.
+        cov_ab: Σ_ab = E[δ_a δ_bᵀ], ``(*batch, k, k)``, for correlated operands (default:
+            independent). All batch axes broadcast with the elements'.
+
+    Returns:
+        ``(*batch, k, k)``: the covariance of the right perturbation of ``a @ b``.
+    """
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_compose")
     cov_b = _check_cov(b, cov_b, "cov_b", "propagate_compose")
     if cov_ab is not None:
@@ -78,8 +85,15 @@ def propagate_compose(
 
 @jit_function()
 def propagate_inverse(a: GroupT, cov_a: hints.Array) -> jax.Array:
-    """Covariance of ``a⁻¹``: ``Ad(a) Σ Ad(a)ᵀ``; Σ ``(*batch, k, k)`` (broadcasting with
-    ``a``'s batch) -> ``(*batch, k, k)``."""
+    """Covariance of ``a⁻¹``, to first order: ``Ad(a) Σ Ad(a)ᵀ``.
+
+    Args:
+        a: element of any group.
+        cov_a: Σ, ``(*batch, k, k)``, batch axes broadcasting with ``a``'s.
+
+    Returns:
+        ``(*batch, k, k)``.
+    """
     cov_a = _check_cov(a, cov_a, "cov_a", "propagate_inverse")
     _check_broadcast("propagate_inverse", a, cov_a)
     return _sandwich(jacobians.inverse(a), cov_a)
@@ -89,8 +103,20 @@ def propagate_inverse(a: GroupT, cov_a: hints.Array) -> jax.Array:
 def propagate_apply(
     T: GroupT, cov_T: hints.Array, points: hints.Array, cov_points: Optional[hints.Array] = None
 ) -> jax.Array:
-    """Covariance of the point ``T @ p`` (additive, ``(*batch, space_dim, space_dim)``) from
-    the pose's tangent covariance and, optionally, the point's own."""
+    """Covariance of the point ``T @ p``, to first order: ``J_T Σ_T J_Tᵀ + R Σ_p Rᵀ`` with
+    ``(J_T, R) = jacobians.apply(T, p)``.
+
+    Args:
+        T: element of any group.
+        cov_T: Σ_T, ``(*batch, k, k)``, the covariance of ``T``'s right perturbation.
+        points: ``(*batch, space_dim)``.
+        cov_points: Σ_p, ``(*batch, space_dim, space_dim)``, the points' own (additive)
+            covariance (default: exact points). All batch axes broadcast.
+
+    Returns:
+        ``(*batch, space_dim, space_dim)``: the additive covariance of the transformed
+        points.
+    """
     cov_T = _check_cov(T, cov_T, "cov_T", "propagate_apply")
     if cov_points is not None:
         d = T.space_dim
@@ -111,11 +137,18 @@ def sample(
     cov: hints.Array,
     batch_axes: Tuple[int, ...] = (),
 ) -> GroupT:
-    """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky). Σ must be
-    symmetric positive definite: otherwise the factor, and so the samples, are NaN.
+    """Draw ``mean @ exp(L z)``, ``z ~ N(0, I)``, ``L Lᵀ = Σ`` (Cholesky).
 
-    ``cov``: ``(*batch', k, k)``. Returns a batch of shape ``(*batch_axes, *batch)``, with
-    ``batch`` the broadcast of ``mean.get_batch_axes()`` and ``batch'``."""
+    Args:
+        key: PRNG key.
+        mean: element, batch axes ``batch``.
+        cov: Σ, ``(*batch', k, k)``, symmetric positive definite (otherwise the factor, and
+            so the samples, are NaN).
+        batch_axes: leading axes of independent draws.
+
+    Returns:
+        Elements of batch shape ``(*batch_axes, *broadcast(batch, batch'))``.
+    """
     return _sample(key, mean, cov, tuple(batch_axes))
 
 
@@ -242,7 +275,9 @@ def mean(
         mu0 = poses[0]
     else:
         rest = poses.get_batch_axes()[1:]
-        both = check_batches("mean", "batch axes of `init` and of the poses' rest", init.get_batch_axes(), rest)
+        both = check_batches(
+            "mean", "batch axes of `init` and of the poses' rest", init.get_batch_axes(), rest
+        )
         if tuple(both) != tuple(rest):
             raise ValueError(
                 f"mean: `init` batch axes {init.get_batch_axes()} must broadcast to the poses' "

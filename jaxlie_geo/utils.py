@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable, Tuple, Type, TypeVar, Union, cast
+from typing import Callable, Tuple, Type, TypeVar, Union, cast
 
 import jax.numpy as jnp
 
+from ._base import GroupT, MatrixLieGroup
+from ._checks import check_batches
 from .hints import Array
-
-if TYPE_CHECKING:
-    from ._base import MatrixLieGroup, check_batches
-
-T = TypeVar("T", bound="MatrixLieGroup")
 
 
 def get_epsilon(dtype: jnp.dtype) -> float:
@@ -28,10 +25,10 @@ def get_epsilon(dtype: jnp.dtype) -> float:
 
 def register_lie_group(
     *, matrix_dim: int, parameters_dim: int, tangent_dim: int, space_dim: int
-) -> Callable[[Type[T]], Type[T]]:
+) -> Callable[[Type[GroupT]], Type[GroupT]]:
     """Class decorator setting the four dimension attributes of a group class."""
 
-    def wrap(cls: Type[T]) -> Type[T]:
+    def wrap(cls: Type[GroupT]) -> Type[GroupT]:
         cls.matrix_dim = matrix_dim
         cls.parameters_dim = parameters_dim
         cls.tangent_dim = tangent_dim
@@ -52,8 +49,6 @@ def broadcast_leading_axes(inputs: TupleOfBroadcastable) -> TupleOfBroadcastable
     Arrays are taken as ``(*batch, d)`` (last axis kept); group elements as their
     parameters. Returns a tuple of the same kinds in the same order.
     """
-    from ._base import MatrixLieGroup, check_batches
-
     arrays = [x.parameters() if isinstance(x, MatrixLieGroup) else jnp.asarray(x) for x in inputs]
     for i, a in enumerate(arrays):
         if a.ndim < 1:

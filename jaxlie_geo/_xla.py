@@ -1,0 +1,135 @@
+"""How the kernels are laid out for XLA: barriers, rank alignment, constants, matrix
+products, and the version gates they depend on.
+
+Nothing here changes a value: each helper decides only how XLA schedules or broadcasts a
+computation. Why each exists, with the measurements, is in the design notes
+(``docs/design/memory-and-chunks.md``, ``docs/design/precision.md``).
+
+A leaf module: it knows a group element by its interface (``_checks.is_element``).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any, Tuple
+
+import jax
+import jax.numpy as jnp
+
+from ._checks import is_element
+
+
+def parse_version(text: str) -> Tuple[int, ...]:
+    """The leading numeric components of a version string, then −1 for a pre-release
+    (a, b, rc, dev), which precedes the release: "0.12.0.1" → (0, 12, 0, 1), "0.6.0rc1" →
+    (0, 6, 0, -1), "0.7.0.dev20250601" → (0, 7, 0, -1), "0.5.3+cuda12" → (0, 5, 3)."""
+    out = []
+    for part in text.split("."):
+        digits = re.match(r"\d*", part).group()  # type: ignore[union-attr]  # \d* always matches
+        if digits:
+            out.append(int(digits))
+        if digits != part:
+            suffix = part[len(digits) :]
+            if re.match(r"[-_]?(a|b|c|rc|alpha|beta|pre|preview|dev)\d*$", suffix, re.I):
+                out.append(-1)
+            break
+    return tuple(out)
+
+
+def at_least(text: str, minimum: Tuple[int, ...]) -> bool:
+    """Whether version ``text`` is ``minimum`` or later (missing components count as 0)."""
+    have = parse_version(text)
+    width = max(len(have), len(minimum))
+    return have + (0,) * (width - len(have)) >= minimum + (0,) * (width - len(minimum))
+
+
+# jax 0.5.3 is the first release with JVP and transpose rules for optimization_barrier
+# (0.4.38 the first with its batching rule); older ones fail on the first grad or vmap.
+if not at_least(jax.__version__, (0, 5, 3)):
+    raise ImportError(
+        f"jaxlie_geo needs jax >= 0.5.3 (the first release that differentiates "
+        f"lax.optimization_barrier); found jax {jax.__version__}."
+    )
+
+TANGENTS_PASS_THROUGH = at_least(jax.__version__, (0, 11))
+"""Whether ``materialize`` leaves tangents unbarriered: jax ≥ 0.11 puts them behind a
+second barrier of its own, which jax 0.11.2 fails to transpose inside a ``custom_jvp``
+rule; on older jax the barrier on the tangents is what keeps XLA from recomputing them."""
+
+
+@jax.custom_jvp
+def _barrier(xs: Any) -> Any:
+    """``optimization_barrier`` on the primal values only (see ``materialize``)."""
+    return jax.lax.optimization_barrier(xs)
+
+
+@_barrier.defjvp
+def _barrier_jvp(primals: Any, tangents: Any) -> Any:
+    return _barrier(primals[0]), tangents[0]
+
+
+def materialize(*xs: Any) -> Any:
+    """The inputs, each computed once into memory before a kernel that reads its
+    components several times (a Hamilton product reads each of 8 components 4 times).
+
+    Without it XLA:CPU fuses an expensive producer (exp's sincos, log's arctangent) into
+    every consumer and recomputes it per read. On a whole input already in memory the
+    barrier is free; on a *slice* of one, jax ≥ 0.11 copies the slice, so the SE groups
+    materialize whole elements and call their rotation's barrier-free kernels. Transparent
+    to ``jit``, ``vmap`` and autodiff. Returns one value for one input, else a tuple.
+    Measurements: ``docs/design/memory-and-chunks.md``.
+    """
+    out = _barrier(xs) if TANGENTS_PASS_THROUGH else jax.lax.optimization_barrier(xs)
+    return out[0] if len(xs) == 1 else out
+
+
+def constant(values: Any, like: jax.Array) -> jax.Array:
+    """``values`` (a constant vector or matrix) in ``like``'s dtype, with leading unit axes
+    up to ``like``'s rank, so that combining it with batched arrays needs no implicit rank
+    promotion (users may set ``jax_numpy_rank_promotion="raise"``). The same HLO as the
+    implicit broadcast."""
+    c = jnp.asarray(values, like.dtype)
+    return c.reshape((1,) * (like.ndim - c.ndim) + c.shape)
+
+
+def aligned(*xs: Any) -> Tuple[Any, ...]:
+    """Group elements and ``(*batch, k)`` arrays with leading unit axes added so that all
+    have the same number of batch axes (a reshape: nothing is copied).
+
+    The binary operations broadcast their batch axes numpy-style; with the ranks made equal
+    no implicit rank promotion is left. Unlike ``utils.broadcast_leading_axes`` it does not
+    broadcast to the full batch, so ``materialize`` never writes a whole-batch copy of a
+    single element composed with a batch."""
+    params = [x.parameters() if is_element(x) else x for x in xs]
+    ndim = max(jnp.ndim(p) for p in params)
+    out = []
+    for x, p in zip(xs, params):
+        if jnp.ndim(p) < ndim:
+            p = jnp.reshape(p, (1,) * (ndim - jnp.ndim(p)) + jnp.shape(p))
+            x = type(x)(p) if is_element(x) else p
+        out.append(x)
+    return tuple(out)
+
+
+def matmul(A: jax.Array, B: jax.Array) -> jax.Array:
+    """``A @ B`` at full precision (``Precision.HIGHEST``). At JAX's default precision a
+    float32 product on a GPU runs in TF32 (about 1e-3 relative error on an H100); on CPU
+    the setting changes nothing. See ``docs/design/precision.md``."""
+    return jnp.matmul(A, B, precision=jax.lax.Precision.HIGHEST)
+
+
+def matmul_unrolled(A: jax.Array, B: jax.Array) -> jax.Array:
+    """``(..., m, n) @ (..., n, k)`` for small m, n, k, written out as multiply-adds (exact
+    in any precision mode; a batched 3×3 ``dot`` on XLA:CPU costs several times the fused
+    multiply-adds)."""
+    n = A.shape[-1]
+    rows = []
+    for i in range(A.shape[-2]):
+        row = []
+        for j in range(B.shape[-1]):
+            acc = A[..., i, 0] * B[..., 0, j]
+            for m in range(1, n):
+                acc = acc + A[..., i, m] * B[..., m, j]
+            row.append(acc)
+        rows.append(jnp.stack(row, axis=-1))
+    return jnp.stack(rows, axis=-2)

@@ -1,0 +1,101 @@
+"""The package's import structure: leaf modules import no group code, the import graph has
+no cycle, and no module imports inside a function body to hide one.
+
+Read from the source with ``ast`` (independent of Python's import machinery, which tolerates
+cycles as long as the names exist when they are read).
+"""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import pathlib
+from typing import Dict, Set
+
+import jaxlie_geo
+
+PACKAGE = pathlib.Path(jaxlie_geo.__file__).parent
+
+LEAVES = {"hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar"}
+"""Modules with no knowledge of the group classes: the base imports them, never the reverse."""
+
+
+def _package_imports(node: ast.AST, module: str) -> Set[str]:
+    """The package modules that the import statements under ``node`` name."""
+    out = set()
+    for n in ast.walk(node):
+        if isinstance(n, ast.ImportFrom) and n.level == 1:
+            if n.module:
+                out.add(n.module.split(".")[0])
+            else:  # from . import a, b
+                out.update(a.name for a in n.names)
+        elif isinstance(n, ast.ImportFrom) and (n.module or "").startswith("jaxlie_geo"):
+            parts = (n.module or "").split(".")
+            out.add(parts[1] if len(parts) > 1 else "__init__")
+    out.discard(module)
+    return out
+
+
+def _graph() -> Dict[str, Set[str]]:
+    graph = {}
+    for path in PACKAGE.glob("*.py"):
+        name = path.stem
+        tree = ast.parse(path.read_text(), str(path))
+        graph[name] = _package_imports(tree, name)
+    return graph
+
+
+def test_leaf_modules_import_only_leaves() -> None:
+    graph = _graph()
+    assert LEAVES <= set(graph), sorted(LEAVES - set(graph))
+    for leaf in sorted(LEAVES):
+        upward = graph[leaf] - LEAVES
+        assert not upward, f"{leaf} imports {sorted(upward)}"
+
+
+def test_import_graph_has_no_cycle() -> None:
+    graph = _graph()
+    done: Set[str] = set()
+
+    def visit(name: str, path: tuple) -> None:
+        if name in path:
+            raise AssertionError("import cycle: " + " -> ".join(path[path.index(name) :] + (name,)))
+        if name in done:
+            return
+        for dep in sorted(graph.get(name, ())):
+            if dep != "__init__":
+                visit(dep, path + (name,))
+        done.add(name)
+
+    for name in sorted(graph):
+        visit(name, ())
+
+
+def test_no_import_inside_a_function() -> None:
+    for path in sorted(PACKAGE.glob("*.py")):
+        tree = ast.parse(path.read_text(), str(path))
+        for fn in ast.walk(tree):
+            if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                inner = [n for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))]
+                assert not inner, f"{path.name}: {fn.name} imports at line {inner[0].lineno}"
+
+
+def test_public_modules_list_their_names() -> None:
+    """Every public module has an ``__all__`` naming only attributes that exist and every
+    public function and class it defines; the package's ``__all__`` names every public
+    attribute it exports."""
+    for name in jaxlie_geo.__all__:
+        assert hasattr(jaxlie_geo, name), name
+    exported = {n for n in vars(jaxlie_geo) if not n.startswith("_")}
+    assert exported == set(jaxlie_geo.__all__), sorted(exported ^ set(jaxlie_geo.__all__))
+    for mod in ("hints", "interop", "jacobians", "manifold", "motion", "uncertainty", "utils"):
+        module = getattr(jaxlie_geo, mod)
+        assert hasattr(module, "__all__"), mod
+        missing = [n for n in module.__all__ if not hasattr(module, n)]
+        assert not missing, (mod, missing)
+        defined = {
+            n for n, v in vars(module).items()
+            if not n.startswith("_") and (inspect.isfunction(v) or inspect.isclass(v))
+            and v.__module__ == module.__name__
+        }
+        assert defined <= set(module.__all__), (mod, sorted(defined - set(module.__all__)))
