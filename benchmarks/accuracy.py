@@ -13,8 +13,12 @@ Both libraries get the same inputs: for every group × dtype × angle regime × 
 norm {0, 1e-6, 1, 1e3} (SE groups), --samples random draws with a fixed seed (the band's
 end points included). float32 runs with jax_enable_x64 off, float64 with it on.
 
+With --save the worst errors replace raw/<machine>/accuracy.json and the results page
+(RESULTS.md) is regenerated (report.py).
+
 Usage:
   python benchmarks/accuracy.py                 # two markdown tables (float32, float64)
+  python benchmarks/accuracy.py --save          # ... saved to raw/<machine>/, page regenerated
   python benchmarks/accuracy.py --long          # one row per (group, op, dtype, regime)
   python benchmarks/accuracy.py --worst         # also list the worst input of each failing cell
   python benchmarks/accuracy.py --samples 16 --groups SE3 --json out.json
@@ -40,6 +44,8 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import _mpref as M  # noqa: E402
+import run as _run  # noqa: E402  (benchmarks/run.py: machine_info)
+from report import add_save_arguments, save  # noqa: E402
 
 OP_TEXT = {"exp": "exp", "log": "log", "jac": "d/dx", "hess": "d²/dx²"}
 REGIME_HEAD = {
@@ -50,6 +56,10 @@ REGIME_HEAD = {
     "near_pi": "π−1e-2…π−1e-7 ¹",
     "beyond_pi": "π…10π",
 }
+NOTES = [
+    "¹ float32: π−1e-2…π−2e-6 (one float32 step at π is 2.4e-7).",
+    "θ is the rotation angle; each regime is crossed with |v| ∈ {0, 1e-6, 1, 1e3} for SE2 and SE3.",
+]
 
 
 def _version(name: str) -> str:
@@ -78,6 +88,7 @@ def main() -> int:
     ap.add_argument("--worst", action="store_true", help="print the worst input of failing cells")
     ap.add_argument("--no-jaxlie", action="store_true")
     ap.add_argument("--json", help="write all worst errors (and their inputs) here")
+    add_save_arguments(ap)
     args = ap.parse_args()
     groups = [g for g in args.groups.split(",") if g]
     dtypes = [d for d in args.dtypes.split(",") if d]
@@ -152,9 +163,8 @@ def main() -> int:
                         cells.append(" / ".join(_cell(get(n, g, op, dt, r), op) for n in names))
                     print(f"| {g} | {OP_TEXT[op]} | " + " | ".join(cells) + " |")
             print()
-        print("¹ float32: π−1e-2…π−2e-6 (one float32 step at π is 2.4e-7).")
-    print("θ is the rotation angle; each regime is crossed with |v| ∈ {0, 1e-6, 1, 1e3} "
-          "for SE2 and SE3.")
+        print(NOTES[0])
+    print(NOTES[1])
 
     if args.worst:
         print("\nWorst inputs of the cells over the bound:\n")
@@ -172,6 +182,14 @@ def main() -> int:
                 f,
                 indent=1,
             )
+    if args.save:
+        info = _run.machine_info("benchmarks/accuracy.py")
+        cells = [{"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e}
+                 for (n, g, op, dt, r), (e, _, _) in worst.items() if op in M.OPS_IN_REGIME[r]]
+        data = {"machine": info, "samples": args.samples, "libs": names, "bounds": M.BOUNDS,
+                "ops": OP_TEXT, "regimes": [{"key": r, "label": REGIME_HEAD[r]} for r in M.REGIMES],
+                "notes": NOTES, "cells": cells, "elapsed_s": elapsed}
+        save("accuracy", data, args)
     return 0
 
 

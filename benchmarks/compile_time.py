@@ -28,7 +28,8 @@ import sys
 import time
 
 _REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py")) and _REPO_ROOT not in sys.path:
+if (os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
+        and _REPO_ROOT not in sys.path):
     sys.path.insert(0, _REPO_ROOT)
 
 

@@ -38,8 +38,12 @@ median over repetitions divided by N, and the ratio jacfwd / ours (> 1: the clos
 faster) is the median of the paired per-repetition ratios, with their inter-quartile
 range as a noise gauge. Compile time (trace + lower + compile) is measured separately.
 
+With --save the results replace raw/<machine>/jacobians-<dtype>.json and the results page
+(RESULTS.md) is regenerated (report.py).
+
 Usage:
   python benchmarks/jacobians.py                    # float32, N = 10^5, all groups
+  python benchmarks/jacobians.py --save             # ... saved to raw/<machine>/, page regenerated
   python benchmarks/jacobians.py --dtype float64    # float64 (enables jax x64)
   python benchmarks/jacobians.py --quick            # smoke test: N = 10^3, 3 repeats
   python benchmarks/jacobians.py --groups SE3 --cases jac_right_inv,rminus --sizes 1000,100000
@@ -57,12 +61,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
-import os
 import sys
 import time
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import run as _run  # noqa: E402  (benchmarks/run.py: timing helpers; also puts the repo root on sys.path)
+import jax
+import jax.numpy as jnp
+import numpy as np
+import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
+from report import add_save_arguments, fmt_n, geomean, save
 
 GROUPS = _run.GROUPS
 GROUP_INFO = _run.GROUP_INFO
@@ -90,12 +96,16 @@ CASES = {
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(
-        description="Benchmark jaxlie_geo's closed-form Jacobians against jax.jacfwd (jit, interleaved).",
+        description="Benchmark jaxlie_geo's closed-form Jacobians against jax.jacfwd "
+                    "(jit, interleaved).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--sizes", default=None, help="comma-separated batch sizes (default 100000; --quick: 1000)")
-    p.add_argument("--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3")
-    p.add_argument("--cases", default=",".join(CASES), help="comma-separated subset of " + ",".join(CASES))
+    p.add_argument("--sizes", default=None,
+                   help="comma-separated batch sizes (default 100000; --quick: 1000)")
+    p.add_argument("--groups", default=",".join(GROUPS),
+                   help="comma-separated subset of SO2,SE2,SO3,SE3")
+    p.add_argument("--cases", default=",".join(CASES),
+                   help="comma-separated subset of " + ",".join(CASES))
     p.add_argument("--repeats", type=int, default=None,
                    help="interleaved repetitions per case; default: automatic, 7..25 within a time "
                         "budget per case (--quick: 3)")
@@ -103,15 +113,16 @@ def parse_args(argv=None):
                    help="dtype of the timed runs (the agreement check is always float64)")
     p.add_argument("--quick", action="store_true", help="small size and few repeats (smoke test)")
     p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
-    p.add_argument("--json", default=None, metavar="PATH", help="also write raw results as JSON")
+    p.add_argument("--json", default=None, metavar="PATH",
+                   help="also write the raw results (the --save format) to PATH")
     p.add_argument("--seed", type=int, default=0)
+    add_save_arguments(p)
     args = p.parse_args(argv)
     if args.sizes is None:
         args.sizes = "1000" if args.quick else "100000"
     args.sizes = _run.parse_sizes(p, args.sizes)
     args.groups = _run.parse_choices(p, args.groups, GROUPS, "group", str.upper)
     args.cases = _run.parse_choices(p, args.cases, CASES, "case")
-    args.candidate = "jaxlie_geo"  # for run.machine_info
     return args
 
 
@@ -141,8 +152,6 @@ def make_ours(lib, group: str, case: str):
 
 def make_autodiff(lib, group: str, case: str):
     """vmap over the batch of jacfwd (at 0) of the map the case's Jacobian differentiates."""
-    import jax
-    import jax.numpy as jnp
 
     G = getattr(lib, group)
     k = G.tangent_dim
@@ -208,9 +217,6 @@ def make_autodiff(lib, group: str, case: str):
 
 def make_inputs(lib, group: str, case: str, n: int, seed: int):
     """float64 numpy inputs; needs jax_enable_x64 on (for sample_uniform in float64)."""
-    import numpy as np
-    import jax
-    import jax.numpy as jnp
 
     G = getattr(lib, group)
     info = GROUP_INFO[group]
@@ -232,7 +238,8 @@ def make_inputs(lib, group: str, case: str, n: int, seed: int):
             out.append(xi)
         elif kind == "element":
             key, sub = jax.random.split(key)
-            out.append(np.asarray(G.sample_uniform(sub, (n,), dtype=jnp.float64).parameters(), np.float64))
+            sample = G.sample_uniform(sub, (n,), dtype=jnp.float64)
+            out.append(np.asarray(sample.parameters(), np.float64))
         elif kind == "point":
             out.append(rng.normal(size=(n, info["space_dim"])))
         else:
@@ -246,14 +253,11 @@ def make_inputs(lib, group: str, case: str, n: int, seed: int):
 
 
 def leaves64(tree):
-    import numpy as np
-    import jax
 
     return [np.asarray(x, dtype=np.float64) for x in jax.tree_util.tree_leaves(tree)]
 
 
 def max_abs_diff(a, b) -> float:
-    import numpy as np
 
     la, lb = leaves64(a), leaves64(b)
     if len(la) != len(lb):
@@ -270,9 +274,6 @@ def max_abs_diff(a, b) -> float:
 
 def is_constant(lib, group: str, case: str, seed: int) -> bool:
     """True if our Jacobian is the same for all of a few random inputs (e.g. SO2's J_r = 1)."""
-    import numpy as np
-    import jax
-    import jax.numpy as jnp
 
     inputs = [jnp.asarray(x) for x in make_inputs(lib, group, case, 16, seed + 12345)]
     out = leaves64(jax.jit(make_ours(lib, group, case))(*inputs))
@@ -281,8 +282,6 @@ def is_constant(lib, group: str, case: str, seed: int) -> bool:
 
 def check(lib, group: str, case: str, inputs64) -> float:
     """Max |ours - jacfwd| in float64 on the given inputs."""
-    import jax
-    import jax.numpy as jnp
 
     inputs = [jnp.asarray(x, dtype=jnp.float64) for x in inputs64]
     ours = jax.jit(make_ours(lib, group, case))(*inputs)
@@ -300,8 +299,6 @@ def set_x64(jax, on: bool):
 
 
 def bench_case(lib, group, case, n, args, index):
-    import jax
-    import jax.numpy as jnp
 
     # Inputs and the agreement check, in float64.
     set_x64(jax, True)
@@ -343,11 +340,11 @@ def bench_case(lib, group, case, n, args, index):
     st = _run.paired_stats(t_ours, t_ad)
     label, mapping, _ = CASES[case]
     return {
-        "group": group, "case": case, "jacobian": label, "map": mapping, "n": n, "dtype": args.dtype,
+        "group": group, "case": case, "jacobian": label, "map": mapping, "n": n,
+        "dtype": args.dtype,
         "ours_ns_per_elem": st["median_a"] * 1e9 / n,
         "jacfwd_ns_per_elem": st["median_b"] * 1e9 / n,
         "ratio": st["ratio"],
-        "ratio_of_medians": st["ratio_of_medians"],
         "ratio_q1": st["ratio_q1"], "ratio_q3": st["ratio_q3"],
         "compile_ours_ms": comp_ours * 1e3,
         "compile_jacfwd_ms": comp_ad * 1e3,
@@ -360,8 +357,6 @@ def bench_case(lib, group, case, n, args, index):
 
 def global_warmup(lib, dtype):
     """Pay one-time process costs (backend init, first compile) before measuring anything."""
-    import jax
-    import jax.numpy as jnp
 
     for g in GROUPS:
         G = getattr(lib, g)
@@ -394,7 +389,7 @@ def table_rows(results, markdown):
     for r in results:
         code = (lambda s: f"`{s}`") if markdown else (lambda s: s)
         rows.append([
-            r["group"], code(r["jacobian"]), code(r["map"]), _run.fmt_n(r["n"]),
+            r["group"], code(r["jacobian"]), code(r["map"]), fmt_n(r["n"]),
             fmt_ns(r["ours_ns_per_elem"]), fmt_ns(r["jacfwd_ns_per_elem"]),
             f"{r['ratio']:.2f}", f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
             f"{r['max_abs_diff_float64']:.1e}",
@@ -410,7 +405,8 @@ def render(header, rows, markdown: bool, n_left: int = N_LEFT) -> str:
         out = ["| " + " | ".join(header) + " |",
                "|" + "|".join("---" if i < n_left else "--:" for i in range(len(header))) + "|"]
         return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
+              for i, h in enumerate(header)]
     line = lambda cells: "  ".join(c.ljust(w) if i < n_left else c.rjust(w)  # noqa: E731
                                    for i, (c, w) in enumerate(zip(cells, widths)))
     return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
@@ -421,36 +417,43 @@ def summary(results, skipped, markdown) -> str:
     lines = []
     groups = [g for g in GROUPS if any(r["group"] == g for r in results)]
     if results:
-        parts = [f"{g} {_run.geomean([r['ratio'] for r in results if r['group'] == g]):.2f}" for g in groups]
+        parts = [f"{g} {geomean([r['ratio'] for r in results if r['group'] == g]):.2f}"
+                 for g in groups]
         lines.append("Geometric-mean ratio jacfwd/ours (>1: closed form faster): "
-                     + ", ".join(parts) + f"; overall {_run.geomean([r['ratio'] for r in results]):.2f}.")
+                     + ", ".join(parts)
+                     + f"; overall {geomean([r['ratio'] for r in results]):.2f}.")
     slow = [r for r in results if r["ratio"] < 0.5]
     lines.append("")
     if slow:
         lines.append("Closed forms slower than 2x jacfwd (ratio < 0.5):")
         for r in sorted(slow, key=lambda r: r["ratio"]):
-            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={_run.fmt_n(r['n'])}: ratio {r['ratio']:.2f} "
-                         f"({fmt_ns(r['ours_ns_per_elem'])} vs {fmt_ns(r['jacfwd_ns_per_elem'])} ns/elem)")
+            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
+                         f"ratio {r['ratio']:.2f} ({fmt_ns(r['ours_ns_per_elem'])} vs "
+                         f"{fmt_ns(r['jacfwd_ns_per_elem'])} ns/elem)")
     else:
         lines.append("No closed form is slower than 2x jacfwd (ratio < 0.5).")
     slower = [r for r in results if 0.5 <= r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
     if slower:
-        lines.append("Closed forms slower than jacfwd (ratio < 0.95, whole paired-ratio IQR below 1):")
+        lines.append("Closed forms slower than jacfwd "
+                     "(ratio < 0.95, whole paired-ratio IQR below 1):")
         for r in sorted(slower, key=lambda r: r["ratio"]):
-            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={_run.fmt_n(r['n'])}: ratio {r['ratio']:.2f}")
+            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
+                         f"ratio {r['ratio']:.2f}")
     bad = [r for r in results if not (r["max_abs_diff_float64"] <= TOL)]
     lines.append("")
     if bad:
         lines.append(f"DISAGREEMENT: closed form and jacfwd differ by more than {TOL:g} (float64):")
         for r in bad:
-            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={_run.fmt_n(r['n'])}: "
+            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
                          f"max |diff| = {r['max_abs_diff_float64']:.3g}")
     else:
-        lines.append(f"All closed forms agree with jacfwd to {TOL:g} (float64 check, max abs difference).")
+        lines.append(f"All closed forms agree with jacfwd to {TOL:g} "
+                     "(float64 check, max abs difference).")
     wrong_dtype = [r for r in results if r["output_dtypes"] != [r["dtype"]]]
     if wrong_dtype:
         lines.append("Output dtype differs from the input dtype: "
-                     + ", ".join(f"{r['group']} {r['case']} {r['output_dtypes']}" for r in wrong_dtype))
+                     + ", ".join(f"{r['group']} {r['case']} {r['output_dtypes']}"
+                                 for r in wrong_dtype))
     if skipped:
         lines.append("")
         lines.append("Skipped (constant Jacobian, independent of the inputs): "
@@ -460,18 +463,11 @@ def summary(results, skipped, markdown) -> str:
 
 def main(argv=None):
     args = parse_args(argv)
-
-    import jax
-
     set_x64(jax, args.dtype == "float64")
-    import jax.numpy as jnp
 
     lib = importlib.import_module("jaxlie_geo")
-    info = _run.machine_info(args, jax)
-    info.pop("candidate", None)
+    info = _run.machine_info("benchmarks/jacobians.py", dtype=args.dtype)
     info.pop("jaxlie", None)
-    info["jaxlie_geo_file"] = os.path.dirname(lib.__file__)
-    info["command"] = " ".join(["python", "benchmarks/jacobians.py", *sys.argv[1:]])
     print("# jaxlie_geo closed-form Jacobians vs jax.jacfwd")
     for k, v in info.items():
         print(f"  {k:16s} {v}")
@@ -495,12 +491,13 @@ def main(argv=None):
                 r = bench_case(lib, group, case, n, args, index)
                 index += 1
                 results.append(r)
-                print(f"{group:4s} {case:14s} N={_run.fmt_n(n):>6s}  ours {fmt_ns(r['ours_ns_per_elem']):>7s} ns/el  "
-                      f"jacfwd {fmt_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  ratio {r['ratio']:5.2f} "
-                      f"[{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  compile {r['compile_ours_ms']:5.0f}/"
-                      f"{r['compile_jacfwd_ms']:5.0f} ms  x{r['repeats']}  "
-                      f"diff64 {r['max_abs_diff_float64']:.1e}  diff{args.dtype[-2:]} "
-                      f"{r['max_abs_diff_timed_dtype']:.1e}", flush=True)
+                print(f"{group:4s} {case:14s} N={fmt_n(n):>6s}  "
+                      f"ours {fmt_ns(r['ours_ns_per_elem']):>7s} ns/el  "
+                      f"jacfwd {fmt_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  "
+                      f"ratio {r['ratio']:5.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
+                      f"compile {r['compile_ours_ms']:5.0f}/{r['compile_jacfwd_ms']:5.0f} ms  "
+                      f"x{r['repeats']}  diff64 {r['max_abs_diff_float64']:.1e}  "
+                      f"diff{args.dtype[-2:]} {r['max_abs_diff_timed_dtype']:.1e}", flush=True)
 
     elapsed = time.perf_counter() - t_start
     print()
@@ -515,11 +512,14 @@ def main(argv=None):
     print()
     print(f"total benchmark time: {elapsed:.0f} s")
 
+    data = {"machine": info, "results": results,
+            "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
+            "elapsed_s": elapsed}
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"machine": info, "results": results,
-                       "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
-                       "elapsed_s": elapsed}, f, indent=1)
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(data, f, indent=1, ensure_ascii=False)
+    if args.save:
+        save(f"jacobians-{args.dtype}", data, args)
     return 0
 
 

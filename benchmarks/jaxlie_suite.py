@@ -9,8 +9,9 @@ package registry (``pip download jaxlie==1.5.* --no-binary :all:``). The sdist s
 test modules but not the helper module they import (``tests/utils.py``), so this script
 writes one, below: float64 (x64 on), groups and batch shapes as parameters, hypothesis
 seeding NumPy's global generator, elements from ``sample_uniform``, comparisons by
-``numpy.testing.assert_allclose`` (1e-8), a central-difference Jacobian. Every jaxlie module name (``jaxlie``, ``jaxlie.manifold``,
-``jaxlie.hints``, ``jaxlie.utils``) is aliased to jaxlie_geo's by a ``conftest.py``.
+``numpy.testing.assert_allclose`` (1e-8), a central-difference Jacobian. Every jaxlie module
+name (``jaxlie``, ``jaxlie.manifold``, ``jaxlie.hints``, ``jaxlie.utils``) is aliased to
+jaxlie_geo's by a ``conftest.py``.
 
 Left out: ``test_jac_left.py``, which calls jaxlie's private ``_SO3_jac_left``, and the
 timing test (``test_jlog_runtime``), whose thresholds are for another machine. Run with
@@ -28,7 +29,8 @@ import sys
 import tarfile
 import tempfile
 
-HELPERS = '''"""Test helpers for jaxlie's test modules (written for jaxlie_geo's benchmarks/jaxlie_suite.py)."""
+HELPERS = '''"""Test helpers for jaxlie's test modules (written by jaxlie_geo's
+benchmarks/jaxlie_suite.py)."""
 import numpy as onp
 import jax
 import pytest

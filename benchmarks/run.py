@@ -21,8 +21,12 @@ Ops (identical inputs for both libraries):
                jaxlie:     a @ G.exp(t * (a.inverse() @ b).log())
   grad         jax.grad of sum |log(exp(xi)^-1 @ b)|^2 w.r.t. xi
 
+With --save the results replace raw/<machine>/speed-<dtype>.json and the results page
+(RESULTS.md, results.png) is regenerated from the raw files (report.py).
+
 Usage:
-  python benchmarks/run.py                      # full default run (float32)
+  python benchmarks/run.py                      # full default run (float32), printed
+  python benchmarks/run.py --save               # ... saved to raw/<machine>/, page regenerated
   python benchmarks/run.py --dtype float64      # float64 (enables jax x64)
   python benchmarks/run.py --quick              # smoke test, small sizes
   python benchmarks/run.py --groups SE3 --ops exp,log --sizes 1,1000 --markdown
@@ -35,17 +39,23 @@ import datetime
 import importlib
 import importlib.metadata
 import json
-import math
 import os
 import platform
 import statistics
+import subprocess
 import sys
 import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from report import add_save_arguments, fmt_n, fmt_ns, geomean, save
 
 # Benchmark the checkout's jaxlie_geo (works with or without an install, and with a stale
 # editable install that predates jaxlie_geo/__init__.py).
 _REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py")) and _REPO_ROOT not in sys.path:
+if (os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
+        and _REPO_ROOT not in sys.path):
     sys.path.insert(0, _REPO_ROOT)
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3")
@@ -67,22 +77,27 @@ def parse_args(argv=None):
     )
     p.add_argument("--sizes", default=None,
                    help="comma-separated batch sizes (default 1,1000,1000000; --quick: 1,100)")
-    p.add_argument("--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3")
-    p.add_argument("--ops", default=",".join(OPS), help="comma-separated subset of " + ",".join(OPS))
+    p.add_argument("--groups", default=",".join(GROUPS),
+                   help="comma-separated subset of SO2,SE2,SO3,SE3")
+    p.add_argument("--ops", default=",".join(OPS),
+                   help="comma-separated subset of " + ",".join(OPS))
     p.add_argument("--repeats", type=int, default=None,
                    help="interleaved repetitions per (group, op, size); default: automatic, "
                         "5..25 within a time budget per case")
     p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     p.add_argument("--quick", action="store_true", help="small sizes and few repeats (smoke test)")
     p.add_argument("--markdown", action="store_true", help="print the result tables as markdown")
-    p.add_argument("--json", default=None, metavar="PATH", help="also write raw results as JSON")
-    p.add_argument("--no-eager", action="store_true", help="skip the eager SE3.exp latency measurement")
+    p.add_argument("--json", default=None, metavar="PATH",
+                   help="also write the raw results (the --save format) to PATH")
+    p.add_argument("--no-eager", action="store_true",
+                   help="skip the eager SE3.exp latency measurement")
     p.add_argument("--memory-n", type=float, default=2**22,
                    help="batch size of the memory table (SE3 ops, compiled, not run; 0 skips it)")
     p.add_argument("--candidate", default="jaxlie_geo",
                    help="module benchmarked against jaxlie (default jaxlie_geo; 'jaxlie' gives an "
                         "A/A run that calibrates the harness: all ratios should be ~1)")
     p.add_argument("--seed", type=int, default=0)
+    add_save_arguments(p)
     args = p.parse_args(argv)
 
     if args.sizes is None:
@@ -90,6 +105,8 @@ def parse_args(argv=None):
     args.sizes = parse_sizes(p, args.sizes)
     args.groups = parse_choices(p, args.groups, GROUPS, "group", str.upper)
     args.ops = parse_choices(p, args.ops, OPS, "op", str.lower)
+    if args.save and args.candidate != "jaxlie_geo":
+        p.error("--save records jaxlie_geo's results; an A/A run (--candidate) is not saved")
     return args
 
 
@@ -134,21 +151,23 @@ def version_of(dist: str) -> str:
 
 
 def git_commit() -> str:
-    import subprocess
-
     try:
-        out = subprocess.run(["git", "-C", _REPO_ROOT, "describe", "--always", "--dirty", "--abbrev=7"],
-                             capture_output=True, text=True, timeout=10)
+        out = subprocess.run(
+            ["git", "-C", _REPO_ROOT, "describe", "--always", "--dirty", "--abbrev=7"],
+            capture_output=True, text=True, timeout=10)
         return out.stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 
 
-def machine_info(args, jax) -> dict:
+def machine_info(command: str, **run) -> dict:
+    """The machine and the versions a run used (the ``machine`` entry of a raw file), then
+    the run's own fields (dtype, ...) and its command line."""
     try:
         affinity = len(os.sched_getaffinity(0))
     except AttributeError:
         affinity = os.cpu_count()
+    geo = importlib.import_module("jaxlie_geo")
     return {
         "date": datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"),
         "cpu": cpu_model(),
@@ -159,13 +178,14 @@ def machine_info(args, jax) -> dict:
         "jax": version_of("jax"),
         "jaxlib": version_of("jaxlib"),
         "jaxlie": version_of("jaxlie"),
-        "jaxlie_geo": version_of("jaxlie_geo") + f" (commit {git_commit()})",
+        "jaxlie_geo": getattr(geo, "__version__", version_of("jaxlie_geo")),
+        "commit": git_commit(),
         "numpy": version_of("numpy"),
         "backend": jax.default_backend(),
         "devices": ", ".join(str(d) for d in jax.devices()),
-        "dtype": args.dtype,
-        "candidate": args.candidate,
-        "command": " ".join(["python", "benchmarks/run.py", *sys.argv[1:]]),
+        "device_kind": jax.devices()[0].device_kind,
+        **run,
+        "command": " ".join(["python", command, *sys.argv[1:]]),
     }
 
 
@@ -181,8 +201,6 @@ def make_op(lib, group: str, op: str, native: bool):
     `native` selects jaxlie_geo's own interpolate(); jaxlie has none and gets the
     defining expression a @ exp(t * log(a^-1 b)).
     """
-    import jax
-    import jax.numpy as jnp
 
     G = getattr(lib, group)
 
@@ -216,9 +234,6 @@ def make_op(lib, group: str, op: str, native: bool):
 
 def make_inputs(group: str, op: str, n: int, dtype, seed: int, ref_lib):
     """Identical inputs (numpy -> jax arrays) for both libraries."""
-    import numpy as np
-    import jax
-    import jax.numpy as jnp
 
     info = GROUP_INFO[group]
     rng = np.random.default_rng([seed, GROUPS.index(group), OPS.index(op), n])
@@ -269,7 +284,6 @@ def make_inputs(group: str, op: str, n: int, dtype, seed: int, ref_lib):
 
 def compile_fn(fn, args):
     """Trace + lower + compile; returns (compiled, seconds)."""
-    import jax
 
     t0 = time.perf_counter()
     compiled = jax.jit(fn).lower(*args).compile()
@@ -278,7 +292,6 @@ def compile_fn(fn, args):
 
 def run_n(fn, args, n: int) -> float:
     """Mean seconds per call over n blocking calls."""
-    import jax
 
     bur = jax.block_until_ready
     t0 = time.perf_counter()
@@ -324,7 +337,7 @@ def paired_stats(t_a, t_b) -> dict:
     q1, q3 = quantiles(paired)
     med_a, med_b = statistics.median(t_a), statistics.median(t_b)
     return {"median_a": med_a, "median_b": med_b, "ratio": statistics.median(paired),
-            "ratio_of_medians": med_b / med_a, "ratio_q1": q1, "ratio_q3": q3}
+            "ratio_q1": q1, "ratio_q3": q3}
 
 
 def quantiles(xs):
@@ -342,8 +355,6 @@ def quantiles(xs):
 
 def max_disagreement(group, op, out_geo, out_ref) -> float:
     """Max over outputs of |geo - ref| / (1 + |ref|)."""
-    import numpy as np
-    import jax
 
     a = [np.asarray(x, dtype=np.float64) for x in jax.tree_util.tree_leaves(out_geo)]
     b = [np.asarray(x, dtype=np.float64) for x in jax.tree_util.tree_leaves(out_ref)]
@@ -369,7 +380,6 @@ def max_disagreement(group, op, out_geo, out_ref) -> float:
 
 
 def bench_case(geo, ref, native, group, op, n, args, dtype):
-    import jax
 
     inputs = make_inputs(group, op, n, dtype, args.seed, ref)
     f_geo = make_op(geo, group, op, native=native)
@@ -399,7 +409,6 @@ def bench_case(geo, ref, native, group, op, n, args, dtype):
         "geo_ns_per_elem": st["median_a"] * 1e9 / n,
         "ref_ns_per_elem": st["median_b"] * 1e9 / n,
         "ratio": st["ratio"],
-        "ratio_of_medians": st["ratio_of_medians"],
         "ratio_q1": st["ratio_q1"], "ratio_q3": st["ratio_q3"],
         "compile_geo_ms": comp_geo * 1e3,
         "compile_ref_ms": comp_ref * 1e3,
@@ -410,9 +419,6 @@ def bench_case(geo, ref, native, group, op, n, args, dtype):
 
 def eager_latency(geo, ref, args, dtype):
     """Per-call latency of SE3.exp on one tangent (batch 1), no user jit."""
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
 
     xi = jnp.asarray(np.random.default_rng(args.seed).normal(size=(1, 6)) * 0.5, dtype=dtype)
     f_geo = lambda x: geo.SE3.exp(x).parameters()
@@ -432,8 +438,6 @@ def eager_latency(geo, ref, args, dtype):
 
 def global_warmup(geo, ref, dtype):
     """Pay one-time process costs (backend init, first compile) before measuring anything."""
-    import jax
-    import jax.numpy as jnp
 
     for lib in (ref, geo):
         for g in GROUPS:
@@ -451,40 +455,18 @@ def memory_table(geo, ref, native, n: int, dtype, seed: int) -> list:
     """Per SE3 op at batch n: XLA's buffer assignment for the compiled program (compiled,
     not run), in MB: arguments, output, temporaries, for both libraries. Peak memory is at
     most their sum."""
-    import jax
-
     rows = []
     for op in OPS:
         small = make_inputs("SE3", op, 1, dtype, seed, ref)
         specs = [jax.ShapeDtypeStruct((n,) + a.shape[1:], a.dtype) for a in small]
-        row = [op]
-        for lib, nat in ((geo, native), (ref, False)):
+        row = {"op": op, "n": n}
+        for side, lib, nat in (("geo", geo, native), ("ref", ref, False)):
             m = jax.jit(make_op(lib, "SE3", op, nat)).lower(*specs).compile().memory_analysis()
-            row += [m.argument_size_in_bytes / 1e6, m.output_size_in_bytes / 1e6,
-                    m.temp_size_in_bytes / 1e6]
+            row[f"{side}_args_mb"] = m.argument_size_in_bytes / 1e6
+            row[f"{side}_out_mb"] = m.output_size_in_bytes / 1e6
+            row[f"{side}_temp_mb"] = m.temp_size_in_bytes / 1e6
         rows.append(row)
     return rows
-
-
-def fmt_ns(x: float) -> str:
-    if x >= 1e6:
-        return f"{x / 1e6:.2f} ms"
-    if x >= 1e3:
-        return f"{x / 1e3:.2f} µs"
-    if x >= 100:
-        return f"{x:.0f} ns"
-    if x >= 10:
-        return f"{x:.1f} ns"
-    if x >= 1:
-        return f"{x:.2f} ns"
-    return f"{x:.3g} ns"  # GPUs at 10^6: 0.1 ns/element needs three significant digits
-
-
-def fmt_n(n: int) -> str:
-    e = math.log10(n) if n > 0 else 0
-    if n >= 1000 and abs(e - round(e)) < 1e-9:
-        return f"10^{int(round(e))}"
-    return str(n)
 
 
 def table_rows(results):
@@ -509,15 +491,11 @@ def render(header, rows, markdown: bool) -> str:
                "|" + "|".join("---" if i < 3 else "--:" for i in range(len(header))) + "|"]
         out += ["| " + " | ".join(r) + " |" for r in rows]
         return "\n".join(out)
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
+              for i, h in enumerate(header)]
     line = lambda cells: "  ".join(c.ljust(w) if i < 3 else c.rjust(w)
                                    for i, (c, w) in enumerate(zip(cells, widths)))
     return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
-
-
-def geomean(xs):
-    xs = [x for x in xs if x > 0]
-    return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else float("nan")
 
 
 def summary(results, markdown: bool, eager=None) -> str:
@@ -525,23 +503,18 @@ def summary(results, markdown: bool, eager=None) -> str:
     ops = [o for o in OPS if any(r["op"] == o for r in results)]
     groups = [g for g in GROUPS if any(r["group"] == g for r in results)]
     sizes = sorted({r["n"] for r in results})
+
+    def row(name, keep):
+        cells = [f"{geomean([r['ratio'] for r in results if keep(r) and r['n'] == n]):.2f}"
+                 for n in sizes]
+        return [name, *cells, f"{geomean([r['ratio'] for r in results if keep(r)]):.2f}"]
+
+    rows = [row(o, lambda r, o=o: r["op"] == o) for o in ops]
+    rows += [row(g, lambda r, g=g: r["group"] == g) for g in groups]
+    rows.append(row("overall", lambda r: True))
     header = ["op"] + [fmt_n(n) for n in sizes] + ["all"]
-    rows = []
-    for o in ops:
-        row = [o]
-        for n in sizes:
-            row.append(f"{geomean([r['ratio'] for r in results if r['op'] == o and r['n'] == n]):.2f}")
-        row.append(f"{geomean([r['ratio'] for r in results if r['op'] == o]):.2f}")
-        rows.append(row)
-    for g in groups:
-        row = [g]
-        for n in sizes:
-            row.append(f"{geomean([r['ratio'] for r in results if r['group'] == g and r['n'] == n]):.2f}")
-        row.append(f"{geomean([r['ratio'] for r in results if r['group'] == g]):.2f}")
-        rows.append(row)
-    rows.append(["overall"] + [f"{geomean([r['ratio'] for r in results if r['n'] == n]):.2f}" for n in sizes]
-                + [f"{geomean([r['ratio'] for r in results]):.2f}"])
-    lines.append("Geometric-mean ratio jaxlie/jaxlie_geo (>1: jaxlie_geo faster), by op and by group:")
+    lines.append("Geometric-mean ratio jaxlie/jaxlie_geo (>1: jaxlie_geo faster), "
+                 "by op and by group:")
     lines.append("")
     lines.append(render_simple(header, rows, markdown))
     # "slower" = median ratio below 0.95 and the whole paired-ratio IQR below 1 (A/A runs with
@@ -549,32 +522,38 @@ def summary(results, markdown: bool, eager=None) -> str:
     slower = [r for r in results if r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
     lines.append("")
     if eager is not None and eager["ratio"] < 0.95 and eager["ratio_q3"] < 1.0:
-        lines.append(f"Eager (no jit) SE3.exp, batch 1: jaxlie_geo is slower, {eager['geo_us']:.1f} µs vs "
-                     f"{eager['ref_us']:.1f} µs per call (ratio {eager['ratio']:.3f}).")
+        lines.append(f"Eager (no jit) SE3.exp, batch 1: jaxlie_geo is slower, "
+                     f"{eager['geo_us']:.1f} µs vs {eager['ref_us']:.1f} µs per call "
+                     f"(ratio {eager['ratio']:.3f}).")
     if slower:
-        lines.append("Cases where jaxlie_geo is slower (ratio < 0.95 and whole paired-ratio IQR below 1):")
+        lines.append("Cases where jaxlie_geo is slower "
+                     "(ratio < 0.95 and whole paired-ratio IQR below 1):")
         for r in sorted(slower, key=lambda r: r["ratio"]):
             lines.append(f"  {'- ' if markdown else ''}{r['group']} {r['op']} N={fmt_n(r['n'])}: "
                          f"ratio {r['ratio']:.2f} ({fmt_ns(r['geo_ns_per_elem'])} vs "
                          f"{fmt_ns(r['ref_ns_per_elem'])} per element)")
     else:
-        lines.append("No case where jaxlie_geo is clearly slower (ratio < 0.95 with paired-ratio IQR below 1).")
+        lines.append("No case where jaxlie_geo is clearly slower "
+                     "(ratio < 0.95 with paired-ratio IQR below 1).")
     tol = 1e-3 if results and results[0].get("dtype") == "float32" else 1e-8
-    bad = [r for r in results if not (r["max_rel_diff"] < (10 * tol if r["op"] == "grad" else tol))]
+    bad = [r for r in results
+           if not (r["max_rel_diff"] < (10 * tol if r["op"] == "grad" else tol))]
     if bad:
         lines.append("")
-        lines.append("Note: outputs disagree between the libraries beyond the dtype's tolerance in these cases. "
-                     "Either a library is inaccurate there (see benchmarks/accuracy.py) or the two sides "
-                     "compute different things; check before trusting the ratio:")
+        lines.append("Note: outputs disagree between the libraries beyond the dtype's tolerance "
+                     "in these cases. Either a library is inaccurate there (see "
+                     "benchmarks/accuracy.py) or the two sides compute different things; check "
+                     "before trusting the ratio:")
         for r in bad:
-            lines.append(f"  {r['group']} {r['op']} N={fmt_n(r['n'])}: max |diff|/(1+|jaxlie|) = "
-                         f"{r['max_rel_diff']:.3g}")
+            lines.append(f"  {r['group']} {r['op']} N={fmt_n(r['n'])}: "
+                         f"max |diff|/(1+|jaxlie|) = {r['max_rel_diff']:.3g}")
     return "\n".join(lines)
 
 
 def render_simple(header, rows, markdown):
     if markdown:
-        out = ["| " + " | ".join(header) + " |", "|---|" + "|".join("--:" for _ in header[1:]) + "|"]
+        out = ["| " + " | ".join(header) + " |",
+               "|---|" + "|".join("--:" for _ in header[1:]) + "|"]
         return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)
@@ -585,24 +564,21 @@ def render_simple(header, rows, markdown):
 def main(argv=None):
     args = parse_args(argv)
 
-    import jax
-
     if args.dtype == "float64":
         jax.config.update("jax_enable_x64", True)
-    import jax.numpy as jnp
-
     dtype = jnp.float64 if args.dtype == "float64" else jnp.float32
 
     ref = importlib.import_module("jaxlie")
     geo = importlib.import_module(args.candidate)
     native = hasattr(geo.SO2, "interpolate")
 
-    info = machine_info(args, jax)
+    info = machine_info("benchmarks/run.py", dtype=args.dtype, candidate=args.candidate)
     print("# jaxlie_geo vs jaxlie benchmark")
     for k, v in info.items():
         print(f"  {k:13s} {v}")
     if not native:
-        print(f"  note: {args.candidate} has no interpolate(); both sides use the explicit expression")
+        print(f"  note: {args.candidate} has no interpolate(); "
+              "both sides use the explicit expression")
     print(flush=True)
 
     t_start = time.perf_counter()
@@ -614,17 +590,19 @@ def main(argv=None):
             for n in args.sizes:
                 r = bench_case(geo, ref, native, group, op, n, args, dtype)
                 results.append(r)
-                print(f"{group:4s} {op:12s} N={fmt_n(r['n']):>6s}  geo {fmt_ns(r['geo_ns_per_elem']):>10s}/el  "
+                print(f"{group:4s} {op:12s} N={fmt_n(r['n']):>6s}  "
+                      f"geo {fmt_ns(r['geo_ns_per_elem']):>10s}/el  "
                       f"jaxlie {fmt_ns(r['ref_ns_per_elem']):>10s}/el  ratio {r['ratio']:5.2f} "
-                      f"[{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  compile {r['compile_geo_ms']:5.0f}/"
-                      f"{r['compile_ref_ms']:5.0f} ms  x{r['repeats']}  reldiff {r['max_rel_diff']:.1e}",
-                      flush=True)
+                      f"[{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
+                      f"compile {r['compile_geo_ms']:5.0f}/{r['compile_ref_ms']:5.0f} ms  "
+                      f"x{r['repeats']}  reldiff {r['max_rel_diff']:.1e}", flush=True)
 
     eager = None
     if not args.no_eager:
         eager = eager_latency(geo, ref, args, dtype)
-        print(f"eager SE3.exp (batch 1, no jit): geo {eager['geo_us']:.1f} µs  jaxlie {eager['ref_us']:.1f} µs  "
-              f"ratio {eager['ratio']:.2f} [{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}]", flush=True)
+        print(f"eager SE3.exp (batch 1, no jit): geo {eager['geo_us']:.1f} µs  "
+              f"jaxlie {eager['ref_us']:.1f} µs  ratio {eager['ratio']:.2f} "
+              f"[{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}]", flush=True)
 
     memory = None
     if args.memory_n:
@@ -632,8 +610,9 @@ def main(argv=None):
 
     elapsed = time.perf_counter() - t_start
     print()
-    print(f"## Results ({args.dtype}; per element = median time per call / N; ratio = median over "
-          f"repetitions of jaxlie time / jaxlie_geo time, >1 means jaxlie_geo is faster; IQR of those ratios)")
+    print(f"## Results ({args.dtype}; per element = median time per call / N; ratio = median "
+          "over repetitions of jaxlie time / jaxlie_geo time, >1 means jaxlie_geo is faster; "
+          "IQR of those ratios)")
     print()
     print(render(HEADER, table_rows(results), args.markdown))
     print()
@@ -646,19 +625,23 @@ def main(argv=None):
     print(summary(results, args.markdown, eager))
     print()
     if memory is not None:
-        print(f"## Memory, SE3 at N = {fmt_n(int(args.memory_n))} ({args.dtype}; MB from XLA's buffer "
-              f"assignment: arguments, output, temporaries)")
+        print(f"## Memory, SE3 at N = {fmt_n(int(args.memory_n))} ({args.dtype}; MB from XLA's "
+              "buffer assignment: arguments, output, temporaries)")
         print()
         print(render_simple(["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
-                            [[r[0], f"{r[1]:.0f}", f"{r[2]:.0f}", f"{r[3]:.1f}", f"{r[6]:.1f}"]
+                            [[r["op"], f"{r['geo_args_mb']:.0f}", f"{r['geo_out_mb']:.0f}",
+                              f"{r['geo_temp_mb']:.1f}", f"{r['ref_temp_mb']:.1f}"]
                              for r in memory], args.markdown))
         print()
     print(f"total benchmark time: {elapsed:.0f} s")
 
+    data = {"machine": info, "results": results, "eager_se3_exp": eager, "memory": memory,
+            "elapsed_s": elapsed}
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"machine": info, "results": results, "eager_se3_exp": eager, "memory": memory,
-                       "elapsed_s": elapsed}, f, indent=1)
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(data, f, indent=1, ensure_ascii=False)
+    if args.save:
+        save(f"speed-{args.dtype}", data, args)
     return 0
 
 

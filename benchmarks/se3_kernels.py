@@ -1,8 +1,13 @@
-"""SE3 exp/log: the textbook V-matrix forms against seed 000's closed forms (issue [4] §3).
+"""SE3 exp/log: the textbook V-matrix forms against the axis-split forms.
 
-Both are in jaxlie_geo/_se3.py (``exp_translation``/``log_translation``, ``form=``); this script
-times full SE3 exp and log built on each, interleaved in one process, and measures their worst
-error beyond π (exp) and near π (log) against a float64 reference, in float32.
+The translation part of SE3's exp is t = V(ω) v. The textbook form, v + F1 ω×v + F2 ω×(ω×v)
+(Barfoot, *State Estimation for Robotics* (2017), eq. 7.82), cancels beyond π; the axis-split
+form splits v along and across the rotation axis, F0 v + F1 ω×v + F2 (ω·v) ω (Zhang, *A
+Geometric Introduction to Lie Theory* (2022), §8.4, with ω = θ·axis), and so does the log's
+inverse (§9). Both are in jaxlie_geo/_se3.py (``exp_translation``/``log_translation``,
+``form=``); this script times full SE3 exp and log built on each, interleaved in one process,
+and measures their worst error beyond π (exp) and near π (log) against a float64 reference, in
+float32. The results and the choice: docs/design/se3-kernel-forms.md.
 
     python benchmarks/se3_kernels.py [--n 1048576] [--repeats 21]
 """
@@ -52,7 +57,7 @@ def main() -> None:
     key = jax.random.key(0)
     xi = jax.random.normal(key, (args.n, 6), jnp.float32)
     params = se3_exp(xi, "textbook")
-    forms = ("textbook", "seed000")
+    forms = ("textbook", "axis_split")
     exps = [jax.jit(lambda x, f=f: se3_exp(x, f)) for f in forms]
     logs = [jax.jit(lambda p, f=f: se3_log(p, f)) for f in forms]
     t_exp = median_ns([lambda f=f: f(xi) for f in exps], args.n, args.repeats)
@@ -68,8 +73,9 @@ def main() -> None:
     ref = np.asarray(se3_exp(jnp.asarray(x32, jnp.float64), "textbook"))
     wl = rng.normal(size=(4096, 3))
     wl *= ((np.pi - 10 ** rng.uniform(-6, -2, 4096)) / np.linalg.norm(wl, axis=1))[:, None]
-    p32 = np.asarray(se3_exp(jnp.asarray(np.concatenate([v, wl], 1)), "seed000")).astype(np.float32)
-    ref_log = np.asarray(se3_log(jnp.asarray(p32, jnp.float64), "seed000"))
+    p64 = se3_exp(jnp.asarray(np.concatenate([v, wl], 1)), "axis_split")
+    p32 = np.asarray(p64).astype(np.float32)
+    ref_log = np.asarray(se3_log(jnp.asarray(p32, jnp.float64), "axis_split"))
     eps = np.finfo(np.float32).eps
 
     def ulp(got, ref):
@@ -77,8 +83,10 @@ def main() -> None:
 
     err_exp = [ulp(np.asarray(se3_exp(jnp.asarray(x32), f))[:, 4:], ref[:, 4:]) for f in forms]
     err_log = [ulp(np.asarray(se3_log(jnp.asarray(p32), f))[:, :3], ref_log[:, :3]) for f in forms]
-    print(f"SE3 kernels, float32, N = {args.n}, {jax.devices()[0].platform}, median of {args.repeats}")
-    print("| form | exp ns/elem | log ns/elem | exp translation, θ in [π, 10π], |v| = 1e3 (ulp) | log v, θ in π − [1e-6, 1e-2] (ulp) |")
+    print(f"SE3 kernels, float32, N = {args.n}, {jax.devices()[0].platform}, "
+          f"median of {args.repeats}")
+    print("| form | exp ns/elem | log ns/elem | exp translation, θ in [π, 10π], |v| = 1e3 (ulp) "
+          "| log v, θ in π − [1e-6, 1e-2] (ulp) |")
     print("|---|--:|--:|--:|--:|")
     for i, f in enumerate(forms):
         print(f"| {f} | {t_exp[i]:.1f} | {t_log[i]:.1f} | {err_exp[i]:.1f} | {err_log[i]:.1f} |")
