@@ -1,11 +1,11 @@
 # Two commands for a fresh machine (see README "Quick start"):
 #   make demo   set up .venv if missing, install with the example extras, run the main example
-#   make test   set up .venv if missing, install with the test extras, run the whole suite
+#   make test   set up .venv if missing, install with the test extras, lint, run the whole suite
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench accuracy docs clean
+.PHONY: demo lint test bench accuracy docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -26,21 +26,30 @@ $(VENV)/.installed-test: pyproject.toml | $(PY)
 demo: $(VENV)/.installed-examples
 	$(PY) examples/pose_interpolation.py
 
-# One pytest worker per core (pytest-xdist), at most 8 (each is a process with its own jax
-# and compile caches): compilation dominates the suite and XLA alone keeps about 1.3 of 2
-# cores busy. On the 2-core CI VM, 626-741 s -> 447 s.
-test: $(VENV)/.installed-test
+# ruff (lint and format, configured in pyproject.toml); `make test` fails on a lint error.
+lint: $(VENV)/.installed-test
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+
+# One pytest worker per core (pytest-xdist), at most 8: each is a process with its own jax
+# and compile caches; compilation dominates the suite.
+test: lint
 	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
+# The benchmarks: each run replaces this machine's raw results and regenerates
+# benchmarks/RESULTS.md and its plot (benchmarks/README.md).
 bench: $(VENV)/.installed-test
-	$(PY) benchmarks/run.py
+	$(PY) benchmarks/run.py --save
+	$(PY) benchmarks/run.py --dtype float64 --save
+	$(PY) benchmarks/jacobians.py --save
 
 accuracy: $(VENV)/.installed-test
-	$(PY) benchmarks/accuracy.py
+	$(PY) benchmarks/accuracy.py --save
 
-# The API reference, generated from the docstrings: open out/docs/index.html.
+# The documentation site (mkdocs-material + mkdocstrings, docs/ and the docstrings): open
+# out/site/index.html. Strict: a broken link or an unparsable docstring fails the build.
 docs: $(VENV)/.installed-docs
-	$(PY) -m pdoc --docformat google --math -o out/docs jaxlie_geo
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict -d out/site
 
 clean:
 	rm -rf $(VENV) out build *.egg-info

@@ -1,4 +1,4 @@
-"""The duck game (seed 000, Zhang, *A Geometric Introduction to Lie Theory*, §6.5).
+"""The duck game (Zhang, *A Geometric Introduction to Lie Theory*, 2022, §6.5).
 
 A motorised toy duck is set down at t = 0 and moves with a constant *local* (body-frame)
 linear and angular velocity until t = 8, when it stops. It had to rescue some bread from a
@@ -136,7 +136,7 @@ def draw_2d(path: Path, g0: SE2, g8: SE2, xi, g3: SE2) -> None:
     ax.quiver(ticks[:, 0], ticks[:, 1], u, v, angles="xy", scale_units="xy", scale=1,
               width=0.0045, headwidth=4, headlength=5, color="#3b6fb6", zorder=4,
               label="heading (body x axis), every 1 s")
-    for (x, y, th), t in zip(ticks, tk):
+    for (x, y, _), t in zip(ticks, tk):
         if t in (0.0, T_BREAD, T_END):
             continue
         # Label on the outside of the circle.

@@ -236,9 +236,9 @@ def edge_residual_and_jacobians(T_world_bi, T_world_bj, T_bi_bj_meas):
     """r_ij and its Jacobians with respect to right perturbations of T_world_bi, T_world_bj.
 
     Let P = T_world_bi Z_ij (the pose of j predicted from i) and E = P⁻¹ T_world_bj =
-    exp(r), and use the Jacobians of composition and of right-minus (Solà, Deray,
-    Atchuthan, "A micro Lie theory for state estimation in robotics", 2018, §III–IV; the
-    equations numbered (173) and (176) in ``jaxlie_geo.jacobians``' table):
+    exp(r), and use the Jacobians of composition and of right-minus (Solà, Deray and
+    Atchuthan, *A micro Lie theory for state estimation in robotics*, 2018, §III; the
+    ``compose`` and ``rminus`` rows of the table in ``jaxlie_geo.jacobians``):
 
     - perturbing T_world_bj: log(E exp(δ_j)) ≈ r + J_r⁻¹(r) δ_j, so J_j = J_r⁻¹(r);
     - perturbing T_world_bi moves P by P exp(δ_i') with δ_i' = Ad(Z⁻¹) δ_i (compose:

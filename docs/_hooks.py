@@ -1,0 +1,74 @@
+"""MkDocs hooks: publish the benchmark pages from ``benchmarks/`` without copying them.
+
+The benchmark scripts generate ``benchmarks/RESULTS.md``, with its plot
+``benchmarks/results.png`` beside it. ``on_files`` adds every Markdown and PNG file under
+``benchmarks/`` to the site at the same relative path: ``benchmarks/RESULTS.md`` is the
+"Benchmark results" page of the nav and ``benchmarks/README.md`` "How the benchmarks run";
+any other Markdown file there is published too, reachable by link but kept out of the nav.
+
+Those pages are written for the repository, so they may link to files that are not part of
+the site (``../jaxlie_geo/_so3.py``) or reach the site's pages through ``../docs/``.
+``on_page_markdown`` points the second kind at the page's place in the site and turns the
+first into its text followed by the repository path in code, so a strict build fails only on
+the site's own pages.
+"""
+
+from __future__ import annotations
+
+import posixpath
+import re
+from pathlib import Path
+
+from mkdocs.structure.files import File, Files, InclusionLevel
+
+SOURCE = "benchmarks"
+IN_NAV = {"benchmarks/RESULTS.md", "benchmarks/README.md"}
+SUFFIXES = {".md", ".png"}
+
+# [text](target) and ![alt](target), with an optional "title"; target without spaces.
+_LINK = re.compile(r"(!?)\[([^\]\n]*)\]\(([^)\s]+)(\s+\"[^\"]*\")?\)")
+
+
+def _root(config) -> Path:
+    return Path(config["config_file_path"]).resolve().parent
+
+
+def on_files(files: Files, config) -> Files:
+    root = _root(config)
+    for path in sorted((root / SOURCE).rglob("*")):
+        if not path.is_file() or path.suffix not in SUFFIXES:
+            continue
+        src_uri = path.relative_to(root).as_posix()
+        if files.get_file_from_path(src_uri) is not None:
+            continue
+        file = File.generated(config, src_uri, abs_src_path=str(path))
+        if path.suffix == ".md" and src_uri not in IN_NAV:
+            file.inclusion = InclusionLevel.NOT_IN_NAV
+        files.append(file)
+    return files
+
+
+def on_page_markdown(markdown: str, page, config, files: Files) -> str:
+    src_uri = page.file.src_uri
+    if not src_uri.startswith(SOURCE + "/"):
+        return markdown
+    here = posixpath.dirname(src_uri)
+    docs = Path(config["docs_dir"]).resolve().relative_to(_root(config)).as_posix()
+
+    def fix(match: re.Match) -> str:
+        bang, text, target, title = match.groups()
+        if re.match(r"^[a-z][a-z0-9+.-]*:", target) or target.startswith(("#", "/")):
+            return match.group(0)
+        path, hash_, anchor = target.partition("#")
+        resolved = posixpath.normpath(posixpath.join(here, path)) if path else src_uri
+        if files.get_file_from_path(resolved) is not None:
+            return match.group(0)
+        # A link into docs/ from outside it (../docs/design/x.md): the page's place in the site.
+        if resolved.startswith(docs + "/") and files.get_file_from_path(resolved[len(docs) + 1 :]):
+            relative = posixpath.relpath(resolved[len(docs) + 1 :], here)
+            return f"{bang}[{text}]({relative}{hash_}{anchor}{title or ''})"
+        label = text or posixpath.basename(resolved)
+        shown = resolved if not resolved.startswith("../") else path
+        return label if label == f"`{shown}`" else f"{label} (`{shown}`)"
+
+    return _LINK.sub(fix, markdown)
