@@ -87,14 +87,21 @@ PARAM_DIM = {"SO2": 2, "SE2": 4, "SO3": 4, "SE3": 7}
 # Index sets: tangent translation / rotation parts, and output blocks of exp and log.
 TAN_V = {"SO2": [], "SE2": [0, 1], "SO3": [], "SE3": [0, 1, 2]}
 TAN_W = {"SO2": [0], "SE2": [2], "SO3": [0, 1, 2], "SE3": [3, 4, 5]}
-EXP_BLOCKS = {"SO2": [[0, 1]], "SE2": [[0, 1], [2, 3]], "SO3": [[0, 1, 2, 3]],
-              "SE3": [[0, 1, 2, 3], [4, 5, 6]]}
+EXP_BLOCKS = {
+    "SO2": [[0, 1]],
+    "SE2": [[0, 1], [2, 3]],
+    "SO3": [[0, 1, 2, 3]],
+    "SE3": [[0, 1, 2, 3], [4, 5, 6]],
+}
 LOG_BLOCKS = {g: [b for b in (TAN_V[g], TAN_W[g]) if b] for g in GROUPS}
-EXP_BLOCK_NAMES = {"SO2": ["rot"], "SE2": ["rot", "trans"], "SO3": ["rot"],
-                   "SE3": ["rot", "trans"]}
+EXP_BLOCK_NAMES = {"SO2": ["rot"], "SE2": ["rot", "trans"], "SO3": ["rot"], "SE3": ["rot", "trans"]}
 LOG_BLOCK_NAMES = {"SO2": ["ω"], "SE2": ["v", "ω"], "SO3": ["ω"], "SE3": ["v", "ω"]}
-TANGENT_NAMES = {"SO2": ["θ"], "SE2": ["vx", "vy", "θ"], "SO3": ["ωx", "ωy", "ωz"],
-                 "SE3": ["vx", "vy", "vz", "ωx", "ωy", "ωz"]}
+TANGENT_NAMES = {
+    "SO2": ["θ"],
+    "SE2": ["vx", "vy", "θ"],
+    "SO3": ["ωx", "ωy", "ωz"],
+    "SE3": ["vx", "vy", "vz", "ωx", "ωy", "ωz"],
+}
 
 
 def angle_band(regime: str, dtype: str) -> Tuple[float, float]:
@@ -257,8 +264,12 @@ def compose_ref(group: str, pa: Sequence, pb: Sequence, invert_a: bool = False) 
         q = [qa[0] * qb[0] - qa[1] * qb[1], qa[0] * qb[1] + qa[1] * qb[0]]
     else:
         (w1, x1, y1, z1), (w2, x2, y2, z2) = qa, qb
-        q = [w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-             w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2]
+        q = [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
     t = [mp.fsum(R[i, j] * tb[j] for j in range(len(tb))) + ta[i] for i in range(len(tb))]
     return q + t
 
@@ -290,11 +301,13 @@ def params_to_matrix(group: str, p: Sequence) -> mp.matrix:
             return mp.matrix([[c, -s], [s, c]])
         return mp.matrix([[c, -s, p[2]], [s, c, p[3]], [0, 0, 1]])
     w, x, y, z = p[:4]
-    R = mp.matrix([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    R = mp.matrix(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
     if group == "SO3":
         return R
     M = mp.eye(4)
@@ -391,8 +404,10 @@ def _angles(regime, dtype, n, rng) -> np.ndarray:
 def _dd(values: Sequence[Sequence[mp.mpf]]) -> Tuple[np.ndarray, np.ndarray]:
     """Double-double (hi, lo) float64 arrays of mpf rows."""
     hi = np.array([[float(v) for v in row] for row in values], dtype=np.float64)
-    lo = np.array([[float(v - h) for v, h in zip(row, hrow)] for row, hrow in zip(values, hi)],
-                  dtype=np.float64)
+    lo = np.array(
+        [[float(v - h) for v, h in zip(row, hrow)] for row, hrow in zip(values, hi)],
+        dtype=np.float64,
+    )
     return hi, lo
 
 
@@ -433,13 +448,27 @@ def make_cases(group: str, dtype: str, n_per: int = 16, seed: int = 0) -> Cases:
     with mp.workdps(DPS):
         exps = [exp_ref(group, x) for x in tangent]
         params = flush(np.array([[float(c) for c in e] for e in exps]).astype(dt))
-        logs = [log_ref(group, p) if rg != "beyond_pi" else [mp.mpf(0)] * len(x)
-                for p, rg, x in zip(params, regime, tangent)]
+        logs = [
+            log_ref(group, p) if rg != "beyond_pi" else [mp.mpf(0)] * len(x)
+            for p, rg, x in zip(params, regime, tangent)
+        ]
         exp_hi, exp_lo = _dd(exps)
         log_hi, log_lo = _dd(logs)
     tv = tangent[:, TAN_V[group]].astype(np.float64)
-    return Cases(group, dtype, np.array(regime), np.array(size), np.array(angle), tangent,
-                 params, exp_hi, exp_lo, log_hi, log_lo, np.sqrt(np.sum(tv * tv, axis=-1)))
+    return Cases(
+        group,
+        dtype,
+        np.array(regime),
+        np.array(size),
+        np.array(angle),
+        tangent,
+        params,
+        exp_hi,
+        exp_lo,
+        log_hi,
+        log_lo,
+        np.sqrt(np.sum(tv * tv, axis=-1)),
+    )
 
 
 # --- error measure ---------------------------------------------------------------------------
@@ -454,8 +483,13 @@ def ulp_errors(got, ref_hi, ref_lo, blocks, dtype, per_block=False):
         d = np.abs((got - ref_hi) - ref_lo)
     d = np.where(np.isfinite(got), d, np.inf)
     each = np.stack(
-        [np.max(d[:, b], axis=-1) / (eps * np.maximum(1.0, np.max(np.abs(ref_hi[:, b]), axis=-1)))
-         for b in blocks], axis=-1)
+        [
+            np.max(d[:, b], axis=-1)
+            / (eps * np.maximum(1.0, np.max(np.abs(ref_hi[:, b]), axis=-1)))
+            for b in blocks
+        ],
+        axis=-1,
+    )
     out = np.max(each, axis=-1)
     return (out, each) if per_block else out
 
@@ -551,16 +585,18 @@ def evaluate(lib, cases: Cases, ops: Sequence[str] = OPS) -> Dict[str, np.ndarra
             out[op + "_dtype"] = str(got.dtype)
             got = np.asarray(got)
             if op in ("exp", "log"):
-                hi, lo = (cases.exp_hi, cases.exp_lo) if op == "exp" else (cases.log_hi,
-                                                                           cases.log_lo)
+                hi, lo = (
+                    (cases.exp_hi, cases.exp_lo) if op == "exp" else (cases.log_hi, cases.log_lo)
+                )
                 blocks = EXP_BLOCKS[g] if op == "exp" else LOG_BLOCKS[g]
                 e, each = ulp_errors(got, hi[m], lo[m], blocks, dt, per_block=True)
                 extra = np.full((len(m), len(blocks)), np.nan)
                 extra[m] = each
                 out[op + "_blocks"] = extra
             else:
-                e, where = derivative_errors(got, g, cases.vnorm[m], 1 if op == "jac" else 2,
-                                             dt, with_argmax=True)
+                e, where = derivative_errors(
+                    got, g, cases.vnorm[m], 1 if op == "jac" else 2, dt, with_argmax=True
+                )
                 extra = np.zeros(len(m), dtype=np.int64)
                 extra[m] = where
                 out[op + "_argmax"] = extra
@@ -600,7 +636,7 @@ def describe_case(cases: Cases, k: int, op: str) -> str:
     x = cases.params[k] if op == "log" else cases.tangent[k]
     vals = ", ".join(f"{float(c):.17g}" for c in x)
     what = "params" if op == "log" else "tangent"
-    return (f"angle≈{cases.angle[k]:.6g} |v|={cases.size[k]:g} {what}=[{vals}]")
+    return f"angle≈{cases.angle[k]:.6g} |v|={cases.size[k]:g} {what}=[{vals}]"
 
 
 def fmt_ulp(e: float) -> str:

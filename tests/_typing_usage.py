@@ -132,4 +132,3 @@ assert_type(uncertainty.mean(T), SE3)
 assert_type(manifold.rplus(T, x), SE3)
 assert_type(manifold.normalize_all(T), SE3)
 assert_type(manifold.rplus_jacobian_parameters_wrt_delta(T), jax.Array)
-

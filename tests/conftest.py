@@ -3,12 +3,22 @@
 * ``jax_enable_x64`` is switched on at import, before any test module runs, so float64 is
   available everywhere; float32 tests build float32 arrays explicitly (and so also check
   that nothing is silently promoted to float64).
+* JAX's persistent compilation cache: compiling is most of the suite's time, and the same
+  program is often compiled more than once (by both pytest-xdist workers, after
+  ``jax.clear_caches()``, under another ``numpy_rank_promotion`` setting, by a subprocess).
+  The cache lives in ``out/jax-cache`` (shared by the workers of a run and kept between
+  runs; ``make clean`` removes it); ``JAXLIE_GEO_TEST_JAX_CACHE`` names another directory,
+  or switches the cache off when empty. It is set through the environment, so notebook
+  kernels and other subprocesses share it. A cache entry that cannot be read (a run killed
+  while writing one) is compiled again, with the warning silenced.
 * Hypothesis profiles: ``dev`` (default, more examples) and ``ci`` (fewer, derandomised,
   no deadline); ``HYPOTHESIS_PROFILE`` picks one (``.ci/run`` sets ``ci``).
 * The harness: ``GROUPS`` lists every group once; ``over_cases`` parametrises a test over
   group × batch shape × dtype, ``over_groups_dtypes`` over group × dtype and
   ``over_groups`` over the groups alone. A group added to ``GROUPS`` (with its generators in
-  ``GENERATORS`` and its tangent layout in ``LAYOUT``) gets every property test.
+  ``GENERATORS`` and its tangent layout in ``LAYOUT``) gets every property test. Subsets
+  (``SE_GROUPS``, ``QUATERNION_GROUPS``, ``NON_ABELIAN_GROUPS``) are derived from ``GROUPS``
+  by a property of each group, never listed by hand.
 * Tolerances live in ``TOL`` (one entry per dtype); tests scale them by an explicit factor
   where an operation is known to amplify rounding.
 * Independent references: the Lie-algebra generators of each group are written out here
@@ -19,11 +29,34 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Any, Callable, Dict, Sequence, Tuple
 
-import jax
+_JAX_CACHE = os.environ.setdefault(
+    "JAXLIE_GEO_TEST_JAX_CACHE", str(Path(__file__).resolve().parents[1] / "out" / "jax-cache")
+)
+_JAX_CACHE_SETTINGS = {  # every compiled program, however small or fast to compile
+    "jax_compilation_cache_dir": _JAX_CACHE,
+    "jax_persistent_cache_min_compile_time_secs": "0",
+    "jax_persistent_cache_min_entry_size_bytes": "-1",
+}
+if _JAX_CACHE:  # before jax is imported (its options read the environment then)
+    for _name, _value in _JAX_CACHE_SETTINGS.items():
+        os.environ.setdefault(_name.upper(), _value)
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+if _JAX_CACHE:  # in case a plugin imported jax first
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+    jax.config.update(
+        "jax_persistent_cache_min_compile_time_secs",
+        float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]),
+    )
+    jax.config.update(
+        "jax_persistent_cache_min_entry_size_bytes",
+        int(os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"]),
+    )
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
@@ -55,6 +88,29 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
+
+_JAX_CACHE_MAX_BYTES = 2**31
+"""Above this size the oldest cache entries are removed (down to half), as a run starts."""
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Unreadable or unwritable cache entries are compiled again: not a test failure. The
+    controller (not the pytest-xdist workers) keeps the cache's size bounded."""
+    for what in ("reading", "writing"):
+        config.addinivalue_line(
+            "filterwarnings", f"ignore:Error {what} persistent compilation cache entry"
+        )
+    if _JAX_CACHE and not hasattr(config, "workerinput") and os.path.isdir(_JAX_CACHE):
+        entries = sorted(Path(_JAX_CACHE).iterdir(), key=lambda p: p.stat().st_mtime)
+        size = sum(p.stat().st_size for p in entries)
+        if size > _JAX_CACHE_MAX_BYTES:
+            for path in entries:  # the oldest first
+                if size <= _JAX_CACHE_MAX_BYTES // 2:
+                    break
+                size -= path.stat().st_size
+                path.unlink()
+
+
 # ---------------------------------------------------------------------------------
 # The harness: every group, batch shape and dtype.
 
@@ -63,8 +119,17 @@ BATCHES: Sequence[Tuple[int, ...]] = [(), (3,), (2, 4)]
 DTYPES = [jnp.float32, jnp.float64]
 
 
-def _dtype_name(dtype: Any) -> str:
+HALF_DTYPES = [jnp.float16, jnp.bfloat16]
+
+
+def dtype_name(dtype: Any) -> str:
+    """The test-id spelling of a dtype: ``float32``."""
     return jnp.dtype(dtype).name
+
+
+def group_name(G: type) -> str:
+    """The test-id spelling of a group: ``SE3``."""
+    return G.__name__
 
 
 def _batch_name(batch: Tuple[int, ...]) -> str:
@@ -72,22 +137,22 @@ def _batch_name(batch: Tuple[int, ...]) -> str:
 
 
 CASES = [
-    pytest.param(G, b, d, id=f"{G.__name__}-{_batch_name(b)}-{_dtype_name(d)}")
+    pytest.param(G, b, d, id=f"{G.__name__}-{_batch_name(b)}-{dtype_name(d)}")
     for G in GROUPS
     for b in BATCHES
     for d in DTYPES
 ]
 GROUP_DTYPES = [
-    pytest.param(G, d, id=f"{G.__name__}-{_dtype_name(d)}") for G in GROUPS for d in DTYPES
+    pytest.param(G, d, id=f"{G.__name__}-{dtype_name(d)}") for G in GROUPS for d in DTYPES
 ]
 
 over_cases = pytest.mark.parametrize(("G", "batch", "dtype"), CASES)
 """Parametrise over group × batch shape × dtype (arguments ``G, batch, dtype``)."""
 over_groups_dtypes = pytest.mark.parametrize(("G", "dtype"), GROUP_DTYPES)
 """Parametrise over group × dtype (arguments ``G, dtype``)."""
-over_groups = pytest.mark.parametrize("G", GROUPS, ids=lambda G: G.__name__)
+over_groups = pytest.mark.parametrize("G", GROUPS, ids=group_name)
 """Parametrise over the groups (argument ``G``)."""
-over_dtypes = pytest.mark.parametrize("dtype", DTYPES, ids=_dtype_name)
+over_dtypes = pytest.mark.parametrize("dtype", DTYPES, ids=dtype_name)
 """Parametrise over the dtypes (argument ``dtype``)."""
 
 # ---------------------------------------------------------------------------------
@@ -146,9 +211,10 @@ def assert_rel_norm(got: Any, want: Any, dtype: Any, ulps: float, axes: int = 1)
     scale = np.sqrt(np.sum(want**2, axis=ax))
     bound = ulps * EPS[jnp.dtype(dtype)] * scale
     bad = ~(err <= bound)
+    shown = (got[bad], want[bad]) if got.ndim > axes else (got, want)
     assert not np.any(bad), (
         f"relative error too large: err={err[bad]}, bound={bound[bad]},\n"
-        f"got={got[bad] if got.ndim > axes else got}\nwant={want[bad] if want.ndim > axes else want}"
+        f"got={shown[0]}\nwant={shown[1]}"
     )
 
 
@@ -186,8 +252,7 @@ GENERATORS: Dict[type, np.ndarray] = {
     SE2: np.stack([_unit(3, 0, 2), _unit(3, 1, 2), _embed(_unit(2, 1, 0) - _unit(2, 0, 1), 3)]),
     SO3: _so3_generators(),
     SE3: np.stack(
-        [_unit(4, 0, 3), _unit(4, 1, 3), _unit(4, 2, 3)]
-        + [_embed(e, 4) for e in _so3_generators()]
+        [_unit(4, 0, 3), _unit(4, 1, 3), _unit(4, 2, 3)] + [_embed(e, 4) for e in _so3_generators()]
     ),
 }
 """``GENERATORS[G][k]`` is the Lie-algebra matrix of the k-th tangent coordinate."""
@@ -202,7 +267,45 @@ LAYOUT: Dict[type, Tuple[slice, Any]] = {
 
 
 def is_se(G: type) -> bool:
+    """Whether ``G`` has a translation part (a semidirect product SE(n))."""
     return LAYOUT[G][1] is not None
+
+
+def rotation_params(G: type) -> int:
+    """How many leading parameters hold the rotation: 2 (a unit complex number) or 4 (a unit
+    quaternion); the translation, if any, follows."""
+    return G.parameters_dim - (G.space_dim if is_se(G) else 0)
+
+
+def is_abelian(G: type) -> bool:
+    """Whether every pair of generators commutes (then exp is a homomorphism and every
+    Jacobian is the identity)."""
+    E = GENERATORS[G]
+    return all(np.array_equal(a @ b, b @ a) for a in E for b in E)
+
+
+# ---------------------------------------------------------------------------------
+# Subsets of the groups, each derived from ``GROUPS`` by a property of the group. A test
+# parametrised over a subset says in its docstring why the property is specific to it.
+
+SE_GROUPS = [G for G in GROUPS if is_se(G)]
+"""The groups with a translation."""
+QUATERNION_GROUPS = [G for G in GROUPS if rotation_params(G) == 4]
+"""The groups whose rotation is a unit quaternion (the 3-D rotation kernels)."""
+NON_ABELIAN_GROUPS = [G for G in GROUPS if not is_abelian(G)]
+"""The groups whose Jacobians, adjoints and means are not trivial."""
+
+over_se_groups = pytest.mark.parametrize("G", SE_GROUPS, ids=group_name)
+"""Parametrise over ``SE_GROUPS`` (argument ``G``)."""
+over_quaternion_groups = pytest.mark.parametrize("G", QUATERNION_GROUPS, ids=group_name)
+"""Parametrise over ``QUATERNION_GROUPS`` (argument ``G``)."""
+over_non_abelian_groups = pytest.mark.parametrize("G", NON_ABELIAN_GROUPS, ids=group_name)
+"""Parametrise over ``NON_ABELIAN_GROUPS`` (argument ``G``)."""
+
+
+def identity_matrices(G: type, batch: Tuple[int, ...]) -> np.ndarray:
+    """The identity matrix of ``G``, broadcast to ``batch``."""
+    return np.broadcast_to(np.eye(G.matrix_dim), (*batch, G.matrix_dim, G.matrix_dim))
 
 
 def hat_ref(G: type, x: Any) -> np.ndarray:
@@ -266,7 +369,9 @@ def key_of(seed: int) -> jax.Array:
     return jax.random.PRNGKey(seed)
 
 
-def _angles(rng: np.random.Generator, batch: Tuple[int, ...], kind: str, max_angle: float) -> np.ndarray:
+def _angles(
+    rng: np.random.Generator, batch: Tuple[int, ...], kind: str, max_angle: float
+) -> np.ndarray:
     u = rng.uniform(size=batch)
     if kind == "generic":
         return u * max_angle
@@ -347,8 +452,14 @@ def all_close_as_matrices(a: Any, b: Any, dtype: Any, factor: float = 1.0, msg: 
 
 __all__ = [
     "GROUPS",
+    "SE_GROUPS",
+    "QUATERNION_GROUPS",
+    "NON_ABELIAN_GROUPS",
     "BATCHES",
     "DTYPES",
+    "HALF_DTYPES",
+    "dtype_name",
+    "group_name",
     "CASES",
     "TOL",
     "COMPAT_TOL",
@@ -357,6 +468,9 @@ __all__ = [
     "over_groups_dtypes",
     "over_groups",
     "over_dtypes",
+    "over_se_groups",
+    "over_quaternion_groups",
+    "over_non_abelian_groups",
     "tol",
     "assert_close",
     "assert_close_compat",
@@ -365,6 +479,9 @@ __all__ = [
     "GENERATORS",
     "LAYOUT",
     "is_se",
+    "rotation_params",
+    "is_abelian",
+    "identity_matrices",
     "hat_ref",
     "vee_ref",
     "expm_ref",

@@ -133,3 +133,16 @@ def test_readme_links_resolve() -> None:
     assert local
     missing = [t for t in local if t and not (REPO / t).exists()]
     assert not missing, f"README.md links to missing files: {missing}"
+
+
+def test_results_page_is_generated_from_the_raw_results() -> None:
+    """benchmarks/RESULTS.md is exactly what benchmarks/report.py renders from
+    benchmarks/raw/: nobody edits the page by hand, and a new raw result regenerates it."""
+    proc = subprocess.run(
+        [sys.executable, "benchmarks/report.py", "--check"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -63,6 +63,7 @@ def quick_run(tmp_path_factory) -> tuple:
 
 
 def test_quick_run_succeeds_and_writes_a_png(quick_run) -> None:
+    """``--quick`` exits 0, reports the problem and writes a non-trivial PNG."""
     proc, png = quick_run
     out = proc.stdout
     assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
@@ -75,9 +76,14 @@ def test_quick_run_succeeds_and_writes_a_png(quick_run) -> None:
 
 
 def test_quick_run_loss_decreases(quick_run) -> None:
+    """The loss falls by 20x, is the sum of its data and smoothness terms, and ends below the
+    ground truth's score (the fit is a near-minimiser)."""
     out = quick_run[0].stdout
-    match = re.search(r"loss ([\d.]+) -> ([\d.]+) \(data ([\d.]+) \+ smoothness ([\d.]+)\); "
-                      r"the ground truth scores ([\d.]+)", out)
+    match = re.search(
+        r"loss ([\d.]+) -> ([\d.]+) \(data ([\d.]+) \+ smoothness ([\d.]+)\); "
+        r"the ground truth scores ([\d.]+)",
+        out,
+    )
     assert match, out
     start, end, data, smooth, truth = map(float, match.groups())
     assert end < 0.05 * start, out
@@ -87,6 +93,9 @@ def test_quick_run_loss_decreases(quick_run) -> None:
 
 
 def test_quick_run_fit_beats_the_raw_data(quick_run) -> None:
+    """Against the ground truth: the raw reports carry the injected noise, and the fit is
+    closer than the reports at the observed poses and than geodesic interpolation through
+    the gaps."""
     out = quick_run[0].stdout
     s = _sections(out)
     raw_pos, raw_rot = _rmse_row("raw reports", s["observed"])

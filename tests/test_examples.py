@@ -19,6 +19,9 @@ def _float(pattern: str, text: str) -> float:
 
 
 def test_pose_interpolation_quick(tmp_path: Path) -> None:
+    """``examples/pose_interpolation.py --quick`` runs, prints its timing report, agrees with an
+    independent float64 NumPy implementation (and with jaxlie where installed), and writes a
+    PNG."""
     png = tmp_path / "pictures" / "pose_interpolation.png"  # parent does not exist yet
     proc = subprocess.run(
         [sys.executable, "examples/pose_interpolation.py", "--quick", "--out", str(png)],
@@ -34,7 +37,9 @@ def test_pose_interpolation_quick(tmp_path: Path) -> None:
     assert re.search(r"Interpolating 10,000 SE3 pose pairs \(float32\)", out), out
     assert _float(r"compile \(first call, incl\. tracing\)\s+([\d.]+) (?:s|ms)\b", out) > 0
     assert re.search(r"jaxlie_geo, one jit call\s+[\d.]+ [nµm]?s/pose .*median of 3 runs", out), out
-    assert re.search(r"Python loop, NumPy per pose\s+[\d.]+ [nµm]?s/pose -> jaxlie_geo is [\d,]+x faster", out), out
+    assert re.search(
+        r"Python loop, NumPy per pose\s+[\d.]+ [nµm]?s/pose -> jaxlie_geo is [\d,]+x faster", out
+    ), out
     assert re.search(r"Python loop, jaxlie_geo call per pose\s+.*x faster", out), out
     assert "extrapolated to 10,000" in out, out
 
@@ -42,9 +47,14 @@ def test_pose_interpolation_quick(tmp_path: Path) -> None:
     assert _float(r"max \|ours - float64 NumPy\| over the \d+ looped pairs: (\S+)", out) < 1e-5
 
     if HAVE_JAXLIE:
-        assert re.search(r"jaxlie 1\.5, same expression, jit\s+[\d.]+ [nµm]?s/pose -> jaxlie_geo is [\d.]+x faster", out), out
+        assert re.search(
+            r"jaxlie 1\.5, same expression, jit\s+[\d.]+ [nµm]?s/pose -> jaxlie_geo is [\d.]+x "
+            r"faster",
+            out,
+        ), out
         # Same computation as jaxlie: the 4x4 matrices agree to float32 accuracy ...
-        assert _float(r"max \|ours - jaxlie\| over 10,000 poses, as 4x4 matrices: (\S+)", out) < 1e-4
+        pattern = r"max \|ours - jaxlie\| over 10,000 poses, as 4x4 matrices: (\S+)"
+        assert _float(pattern, out) < 1e-4
         # ... and where they differ most, ours is the one close to the float64 reference.
         assert _float(r"worst pair #[\d,]+ vs a float64 NumPy reference: ours (\S+),", out) < 1e-5
     else:

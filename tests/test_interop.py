@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import jaxlie
 import numpy as np
 from conftest import GROUPS, over_groups_dtypes, random_element, random_points, to_np
 
-import jax
-import jax.numpy as jnp
 import jaxlie_geo
 from jaxlie_geo.interop import from_jaxlie, to_jaxlie
 
 
 @over_groups_dtypes
 def test_round_trip_keeps_parameters_bit_for_bit(G, dtype):
+    """``to_jaxlie`` and ``from_jaxlie`` give the other library's class with the same batch,
+    dtype and parameters, bit for bit."""
     T = random_element(G, 3, (2, 3), dtype)
     J = to_jaxlie(T)
     assert type(J) is getattr(jaxlie, G.__name__)
@@ -38,6 +40,7 @@ def test_jaxlie_computes_the_same_transform(G, dtype):
 
 
 def test_pytrees_and_jit():
+    """Both conversions map over pytrees (leaving other leaves alone) and run under jit."""
     tree = {
         "poses": [random_element(G, i, (2,), jnp.float64) for i, G in enumerate(GROUPS)],
         "weight": jnp.arange(3.0),
@@ -56,6 +59,7 @@ def test_pytrees_and_jit():
 
 
 def test_elements_of_neither_library_pass_through():
+    """Arrays, and elements already of the target library, pass through unchanged."""
     assert to_jaxlie(jnp.ones(3)).shape == (3,)
     assert from_jaxlie(jaxlie_geo.SO3.identity()).wxyz.shape == (4,)  # ours stay ours
     assert isinstance(to_jaxlie(jaxlie.SO3.identity()), jaxlie.SO3)  # theirs stay theirs
@@ -68,6 +72,7 @@ def test_round_trip_keeps_negative_zeros():
         p = np.asarray(T.parameters())
         assert np.signbit(p).any()
         for back in (from_jaxlie(to_jaxlie(T)).parameters(), to_jaxlie(T).parameters()):
-            np.testing.assert_array_equal(np.asarray(back).view(np.uint32 if p.dtype == np.float32
-                                                                else np.uint64), p.view(
-                np.uint32 if p.dtype == np.float32 else np.uint64))
+            np.testing.assert_array_equal(
+                np.asarray(back).view(np.uint32 if p.dtype == np.float32 else np.uint64),
+                p.view(np.uint32 if p.dtype == np.float32 else np.uint64),
+            )

@@ -11,8 +11,13 @@ from __future__ import annotations
 import dataclasses
 import inspect
 
+import jax
+import jax.numpy as jnp
+import jax_dataclasses as jdc  # a dependency of jaxlie
+import jaxlie as jaxlie_ref  # the test extra installs it; never skipped
 import numpy as np
 import pytest
+from _mpref import x64_for
 from conftest import (
     GROUPS,
     assert_close_compat,
@@ -20,20 +25,15 @@ from conftest import (
     over_dtypes,
     over_groups,
     over_groups_dtypes,
+    over_quaternion_groups,
     random_element,
     random_points,
     random_tangent,
     to_np,
 )
+from flax import serialization  # the test extra installs it
 
-import jax
-import jax.numpy as jnp
 import jaxlie_geo
-from _mpref import x64_for
-
-import jaxlie as jaxlie_ref  # noqa: E402  (the test extra installs it; never skipped)
-import jax_dataclasses as jdc  # noqa: E402  (a dependency of jaxlie)
-from flax import serialization  # noqa: E402  (the test extra installs it)
 
 REF = {
     jaxlie_geo.SO2: jaxlie_ref.SO2,
@@ -53,6 +53,8 @@ def ref_of(T):
 
 
 def test_every_public_name_of_jaxlie_exists():
+    """Every public name of jaxlie, jaxlie.manifold, jaxlie.utils and jaxlie.hints exists here
+    (read from the installed jaxlie)."""
     for mod_ref, mod in (
         (jaxlie_ref, jaxlie_geo),
         (jaxlie_ref.manifold, jaxlie_geo.manifold),
@@ -67,6 +69,7 @@ def test_every_public_name_of_jaxlie_exists():
 
 @over_groups
 def test_class_attributes_fields_and_bases(G):
+    """The dimension attributes and dataclass field names equal jaxlie's; the bases are ours."""
     R = REF[G]
     for attr in ("matrix_dim", "parameters_dim", "tangent_dim", "space_dim"):
         assert getattr(G, attr) == getattr(R, attr), attr
@@ -198,6 +201,8 @@ def test_copy_and_mutate_as_in_jaxlie(G):
 
 @over_groups_dtypes
 def test_core_operations_side_by_side(G, dtype):
+    """exp, log, as/from_matrix (with jaxlie's quaternion sign), apply, multiply and the other
+    methods give jaxlie's values at the side-by-side tolerance."""
     T = random_element(G, 21, (3,), dtype)
     U = random_element(G, 22, (3,), dtype)
     x = random_tangent(G, 21, (3,), dtype, max_angle=3.0)
@@ -225,8 +230,11 @@ def test_core_operations_side_by_side(G, dtype):
     same(G.identity((2,)).parameters(), R.identity((2,)).parameters(), "identity")
     # normalize of perturbed parameters
     noisy = (to_np(T.parameters()) * 1.3 + 0.01).astype(dtype)
-    same(G(jnp.asarray(noisy)).normalize().parameters(), R(noisy).normalize().parameters(),
-         "normalize")
+    same(
+        G(jnp.asarray(noisy)).normalize().parameters(),
+        R(noisy).normalize().parameters(),
+        "normalize",
+    )
     assert G(jnp.asarray(noisy)).normalize().parameters().dtype == dtype
     # as_matrix of non-unit parameters: jaxlie's matrices (for SO3, the rotation of q/|q|)
     same(G(jnp.asarray(noisy)).as_matrix(), R(noisy).as_matrix(), "as_matrix non-unit")
@@ -234,10 +242,16 @@ def test_core_operations_side_by_side(G, dtype):
     # SO2's R p by |z|), and the gradient with respect to raw parameters, radial part
     # included, which a projected-gradient optimiser follows (jaxlie's se3_optimization).
     same(G(jnp.asarray(noisy)).apply(p), R(noisy).apply(p), "apply non-unit")
-    same(G(jnp.asarray(noisy)).multiply(U).parameters(), R(noisy).multiply(UR).parameters(),
-         "multiply non-unit")
-    same(G(jnp.asarray(noisy)).inverse().parameters(), R(noisy).inverse().parameters(),
-         "inverse non-unit")
+    same(
+        G(jnp.asarray(noisy)).multiply(U).parameters(),
+        R(noisy).multiply(UR).parameters(),
+        "multiply non-unit",
+    )
+    same(
+        G(jnp.asarray(noisy)).inverse().parameters(),
+        R(noisy).inverse().parameters(),
+        "inverse non-unit",
+    )
 
     def raw_grad(lib_G, params):
         return jax.grad(lambda q: jnp.sum(jnp.sin(lib_G(q).apply(p))))(params)
@@ -247,6 +261,8 @@ def test_core_operations_side_by_side(G, dtype):
 
 @over_dtypes
 def test_factories_side_by_side(dtype):
+    """The group-specific factories and readers (radians, rpy, quaternion orderings,
+    rotation-and-translation) give jaxlie's values."""
     L, J = jaxlie_geo, jaxlie_ref
     rng = np.random.default_rng(0)
     a = rng.uniform(-3.0, 3.0, size=(3, 5)).astype(dtype)
@@ -258,7 +274,9 @@ def test_factories_side_by_side(dtype):
         assert_close_compat(ours, ref, dtype, msg=what)
 
     # SO2
-    same(L.SO2.from_radians(yaw).as_matrix(), J.SO2.from_radians(yaw).as_matrix(), "SO2.from_radians")
+    same(
+        L.SO2.from_radians(yaw).as_matrix(), J.SO2.from_radians(yaw).as_matrix(), "SO2.from_radians"
+    )
     same(L.SO2.from_radians(yaw).as_radians(), J.SO2.from_radians(yaw).as_radians(), "as_radians")
     # SO3
     for name in ("from_x_radians", "from_y_radians", "from_z_radians"):
@@ -274,14 +292,17 @@ def test_factories_side_by_side(dtype):
     same(Rl.as_rpy_radians().yaw, yaw, "rpy round trip")
     xyzw = Rj.as_quaternion_xyzw()
     same(Rl.as_quaternion_xyzw(), xyzw, "as_quaternion_xyzw")
-    same(L.SO3.from_quaternion_xyzw(np.asarray(xyzw)).parameters(),
-         J.SO3.from_quaternion_xyzw(xyzw).parameters(), "from_quaternion_xyzw")
+    same(
+        L.SO3.from_quaternion_xyzw(np.asarray(xyzw)).parameters(),
+        J.SO3.from_quaternion_xyzw(xyzw).parameters(),
+        "from_quaternion_xyzw",
+    )
     # SE2
     El = L.SE2.from_xy_theta(t2[:, 0], t2[:, 1], yaw)
     Ej = J.SE2.from_xy_theta(t2[:, 0], t2[:, 1], yaw)
     same(El.parameters(), Ej.parameters(), "SE2.from_xy_theta")
     # SE2/SE3 constructors and accessors
-    for (Gl, Gj, Rl_, Rj_, t) in (
+    for Gl, Gj, Rl_, Rj_, t in (
         (L.SE2, J.SE2, L.SO2.from_radians(yaw), J.SO2.from_radians(yaw), t2),
         (L.SE3, J.SE3, Rl, Rj, t3),
     ):
@@ -290,8 +311,11 @@ def test_factories_side_by_side(dtype):
         same(A.parameters(), B.parameters(), f"{Gl.__name__}.from_rotation_and_translation")
         assert A.parameters().dtype == dtype
         same(Gl.from_rotation(Rl_).as_matrix(), Gj.from_rotation(Rj_).as_matrix(), "from_rotation")
-        same(Gl.from_translation(t).as_matrix(), Gj.from_translation(t).as_matrix(),
-             "from_translation")
+        same(
+            Gl.from_translation(t).as_matrix(),
+            Gj.from_translation(t).as_matrix(),
+            "from_translation",
+        )
         same(A.rotation().parameters(), B.rotation().parameters(), "rotation()")
         same(A.translation(), B.translation(), "translation()")
 
@@ -329,18 +353,23 @@ def test_sample_uniform_float32_matches_jaxlie_without_x64(G):
 # Quaternion signs are never flipped implicitly.
 
 
-@pytest.mark.parametrize("G", [jaxlie_geo.SO3, jaxlie_geo.SE3], ids=lambda G: G.__name__)
+@over_quaternion_groups
 def test_quaternion_sign_is_kept(G):
+    """A quaternion with w < 0 keeps its sign through identity products, ``normalize``, double
+    inversion and the xyzw conversions, as in jaxlie; exp beyond π gives w < 0 in both."""
     T = random_element(G, 5, (4,), jnp.float64)
     p = np.array(T.parameters())
     p[..., :4] *= -np.sign(p[..., :1])  # w < 0 everywhere
     T = G(jnp.asarray(p))
     I = G.identity()
     for out in (T @ I, I @ T, T.normalize(), G(jnp.asarray(p)).inverse().inverse()):
-        np.testing.assert_allclose(to_np(out.parameters())[..., :4], p[..., :4], rtol=1e-15,
-                                   atol=1e-15)
-    np.testing.assert_array_equal(to_np((T @ I).parameters()), to_np((ref_of(T) @ REF[G].identity()).parameters()))
-    q = p[..., :4] if G is jaxlie_geo.SO3 else p[..., :4]
+        np.testing.assert_allclose(
+            to_np(out.parameters())[..., :4], p[..., :4], rtol=1e-15, atol=1e-15
+        )
+    np.testing.assert_array_equal(
+        to_np((T @ I).parameters()), to_np((ref_of(T) @ REF[G].identity()).parameters())
+    )
+    q = p[..., :4]
     xyzw = np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
     R = jaxlie_geo.SO3.from_quaternion_xyzw(xyzw)
     np.testing.assert_array_equal(to_np(R.wxyz), q)
@@ -348,19 +377,23 @@ def test_quaternion_sign_is_kept(G):
     # exp beyond π gives w < 0 in both libraries
     x = np.zeros(G.tangent_dim)
     x[-1] = 4.0
-    np.testing.assert_allclose(to_np(G.exp(x).parameters()), to_np(REF[G].exp(x).parameters()),
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        to_np(G.exp(x).parameters()), to_np(REF[G].exp(x).parameters()), rtol=1e-12, atol=1e-12
+    )
     assert float(G.exp(x).parameters()[0]) < 0
 
 
 @over_dtypes
 def test_from_matrix_picks_jaxlies_quaternion_sign(dtype):
+    """``SO3.from_matrix`` picks jaxlie's quaternion sign for 20 000 rotations (w = 0 and
+    near-identity ties included), and ``SE3.from_matrix`` the same quaternion."""
     # Shepperd's pivot (largest of 4w², 4x², 4y², 4z²) and jaxlie's branches on the diagonal
     # chose opposite signs for 2.8% of random rotations; near-ties included here.
     q = np.random.default_rng(11).normal(size=(20000, 4))
     q[:2000, 0] = 0.0  # angle π: w = 0
     q[2000:4000, 1:] *= 1e-4  # near the identity
-    M = to_np(jaxlie_geo.SO3(jnp.asarray(q / np.linalg.norm(q, axis=-1, keepdims=True), dtype)).as_matrix())
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    M = to_np(jaxlie_geo.SO3(jnp.asarray(q, dtype)).as_matrix())
     ours = to_np(jaxlie_geo.SO3.from_matrix(M).wxyz)
     ref = to_np(jaxlie_ref.SO3.from_matrix(jnp.asarray(M)).wxyz)
     sign = np.sign(np.sum(ours * ref, axis=-1))
@@ -377,6 +410,7 @@ def test_from_matrix_picks_jaxlies_quaternion_sign(dtype):
 
 @over_dtypes
 def test_tangent_orderings(dtype):
+    """The tangent orderings are jaxlie's: SE2 (vx, vy, θ), SE3 (v, ω), SO3 the rotation vector."""
     L = jaxlie_geo
     th = 0.7
     # SE2: (vx, vy, theta)
@@ -394,18 +428,23 @@ def test_tangent_orderings(dtype):
     assert_close_compat(E.rotation().as_matrix(), L.SO3.from_z_radians(th).as_matrix(), dtype)
     assert_close_compat(E.log(), [0, 0, 0, 0, 0, th], dtype)
     # SO3 tangent is the rotation vector
-    assert_close_compat(L.SO3.exp(np.array([th, 0, 0], dtype)).as_matrix(),
-                        L.SO3.from_x_radians(th).as_matrix(), dtype)
+    assert_close_compat(
+        L.SO3.exp(np.array([th, 0, 0], dtype)).as_matrix(),
+        L.SO3.from_x_radians(th).as_matrix(),
+        dtype,
+    )
     for G in GROUPS:
         x = random_tangent(G, 4, (), dtype)
         assert_close_compat(G.exp(x).as_matrix(), REF[G].exp(x).as_matrix(), dtype)
 
 
 # ---------------------------------------------------------------------------------
-# utils and manifold.
+# utils (manifold: test_manifold.py).
 
 
 def test_utils_side_by_side():
+    """``utils.get_epsilon``, ``broadcast_leading_axes`` and ``register_lie_group`` behave as
+    jaxlie's."""
     for dt in (jnp.float32, jnp.float64):
         assert jaxlie_geo.utils.get_epsilon(jnp.dtype(dt)) == jaxlie_ref.utils.get_epsilon(
             jnp.dtype(dt)
@@ -419,125 +458,16 @@ def test_utils_side_by_side():
     np.testing.assert_array_equal(to_np(ours[0].parameters()), to_np(ref[0].parameters()))
     np.testing.assert_array_equal(to_np(ours[1]), to_np(ref[1]))
 
-    @jaxlie_geo.utils.register_lie_group(matrix_dim=1, parameters_dim=2, tangent_dim=3,
-                                         space_dim=4)
+    @jaxlie_geo.utils.register_lie_group(matrix_dim=1, parameters_dim=2, tangent_dim=3, space_dim=4)
     class Dummy:
         pass
 
     assert (Dummy.matrix_dim, Dummy.parameters_dim, Dummy.tangent_dim, Dummy.space_dim) == (
-        1, 2, 3, 4)
-
-
-def _tree(lib, params):
-    """The same pytree (dict/list/tuple mixing groups and arrays) in either library."""
-    return {
-        "pose": lib.SE3(params["se3"]),
-        "planar": [lib.SE2(params["se2"]), lib.SO2(params["so2"])],
-        "rot": (lib.SO3(params["so3"]),),
-        "bias": params["bias"],
-    }
-
-
-def _params(dtype):
-    L = jaxlie_geo
-    return {
-        "se3": np.asarray(random_element(L.SE3, 1, (2,), dtype).parameters()),
-        "se2": np.asarray(random_element(L.SE2, 2, (), dtype).parameters()),
-        "so2": np.asarray(random_element(L.SO2, 3, (3,), dtype).parameters()),
-        "so3": np.asarray(random_element(L.SO3, 4, (), dtype).parameters()),
-        "bias": np.linspace(-1, 1, 5).astype(dtype),
-    }
-
-
-def _flat(tree):
-    return [
-        to_np(x.parameters() if isinstance(x, (jaxlie_geo.MatrixLieGroup, jaxlie_ref.MatrixLieGroup)) else x)
-        for x in jax.tree.leaves(
-            tree, is_leaf=lambda x: isinstance(x, (jaxlie_geo.MatrixLieGroup, jaxlie_ref.MatrixLieGroup))
-        )
-    ]
-
-
-def _cost(lib):
-    def cost(tree, target):
-        pose = tree["pose"]
-        r1 = (pose.inverse() @ target["pose"]).log()
-        r2 = tree["planar"][0].log() * jnp.sum(tree["bias"])
-        r3 = (tree["planar"][1] @ target["planar"][1].inverse()).log()
-        r4 = tree["rot"][0].apply(jnp.array([1.0, 2.0, 3.0], tree["bias"].dtype))
-        return jnp.sum(r1**2) + jnp.sum(r2**2) + jnp.sum(r3**2) + jnp.sum(jnp.sin(r4))
-
-    return cost
-
-
-@over_dtypes
-def test_manifold_side_by_side(dtype):
-    P, Q = _params(dtype), {k: v for k, v in _params(dtype).items()}
-    Q["se3"] = np.asarray(random_element(jaxlie_geo.SE3, 9, (2,), dtype).parameters())
-    Q["so2"] = np.asarray(random_element(jaxlie_geo.SO2, 8, (3,), dtype).parameters())
-    ours, ref = _tree(jaxlie_geo, P), _tree(jaxlie_ref, P)
-    ours_b, ref_b = _tree(jaxlie_geo, Q), _tree(jaxlie_ref, Q)
-
-    def same(a, b, what):
-        fa, fb = _flat(a), _flat(b)
-        assert len(fa) == len(fb), what
-        for x, y in zip(fa, fb):
-            assert_close_compat(x, y, dtype, msg=what)
-
-    same(jaxlie_geo.manifold.zero_tangents(ours), jaxlie_ref.manifold.zero_tangents(ref),
-         "zero_tangents")
-    delta = jaxlie_ref.manifold.rminus(ref, ref_b)
-    same(jaxlie_geo.manifold.rminus(ours, ours_b), delta, "rminus")
-    delta_np = jax.tree.map(np.asarray, delta)
-    same(jaxlie_geo.manifold.rplus(ours, delta_np), jaxlie_ref.manifold.rplus(ref, delta),
-         "rplus")
-    same(jaxlie_geo.manifold.normalize_all(ours), jaxlie_ref.manifold.normalize_all(ref),
-         "normalize_all")
-    # The documented difference: on array leaves rminus is b − a (jaxlie: a − b), so that
-    # rplus(a, rminus(a, b)) = b for array and group leaves alike.
-    a = {"x": np.array([1.0, 3.0], dtype), "T": ours["pose"]}
-    b = {"x": np.array([0.5, -1.0], dtype), "T": ours_b["pose"]}
-    d = jaxlie_geo.manifold.rminus(a, b)
-    np.testing.assert_array_equal(to_np(d["x"]), b["x"] - a["x"])
-    np.testing.assert_array_equal(to_np(jaxlie_ref.manifold.rminus(a["x"], b["x"])), a["x"] - b["x"])
-    back = jaxlie_geo.manifold.rplus(a, d)
-    np.testing.assert_array_equal(to_np(back["x"]), b["x"])
-    assert_close_compat(back["T"].as_matrix(), b["T"].as_matrix(), dtype, msg="rplus(rminus)")
-    for T, TR in ((ours["pose"], ref["pose"]), (ours["rot"][0], ref["rot"][0]),
-                  (ours["planar"][1], ref["planar"][1])):
-        assert_close_compat(
-            jaxlie_geo.manifold.rplus_jacobian_parameters_wrt_delta(T),
-            jaxlie_ref.manifold.rplus_jacobian_parameters_wrt_delta(TR),
-            dtype,
-        )
-    g_ours = jaxlie_geo.manifold.grad(_cost(jaxlie_geo))(ours, ours_b)
-    g_ref = jaxlie_ref.manifold.grad(_cost(jaxlie_ref))(ref, ref_b)
-    same(g_ours, g_ref, "grad")
-    (v_ours, g2), (v_ref, _) = (
-        jaxlie_geo.manifold.value_and_grad(_cost(jaxlie_geo))(ours, ours_b),
-        jaxlie_ref.manifold.value_and_grad(_cost(jaxlie_ref))(ref, ref_b),
+        1,
+        2,
+        3,
+        4,
     )
-    assert_close_compat(v_ours, v_ref, dtype)
-    same(g2, g_ours, "value_and_grad")
-    # argnums as a tuple, as in jaxlie
-    ga = jaxlie_geo.manifold.grad(_cost(jaxlie_geo), argnums=(0, 1))(ours, ours_b)
-    gr = jaxlie_ref.manifold.grad(_cost(jaxlie_ref), argnums=(0, 1))(ref, ref_b)
-    same(ga, gr, "grad argnums")
-    # has_aux: (gradient, aux) from grad, ((value, aux), gradient) from value_and_grad
-    def with_aux(lib):
-        return lambda a, b: (_cost(lib)(a, b), {"tag": _cost(lib)(a, a)})
-
-    (g_aux, aux), (g_aux_ref, aux_ref) = (
-        jaxlie_geo.manifold.grad(with_aux(jaxlie_geo), has_aux=True)(ours, ours_b),
-        jaxlie_ref.manifold.grad(with_aux(jaxlie_ref), has_aux=True)(ref, ref_b),
-    )
-    same(g_aux, g_ref, "grad has_aux")
-    assert_close_compat(aux["tag"], aux_ref["tag"], dtype)
-    (v3, aux3), g3 = jaxlie_geo.manifold.value_and_grad(with_aux(jaxlie_geo), has_aux=True)(
-        ours, ours_b)
-    assert_close_compat(v3, v_ref, dtype)
-    assert_close_compat(aux3["tag"], aux_ref["tag"], dtype)
-    same(g3, g_ref, "value_and_grad has_aux")
 
 
 # ---------------------------------------------------------------------------------
@@ -631,9 +561,7 @@ def _api_tour_program(jaxlie, dtype):
     out["se2_log"] = jaxlie.SE2.from_xy_theta(1.0, -2.0, 0.4).log()
     out["from_matrix"] = jaxlie.SE3.from_matrix(T_w_b.as_matrix()).as_matrix()
     out["identity"] = jaxlie.SE3.identity((2, 3)).parameters()
-    out["from_translation"] = jaxlie.SE2.from_translation(
-        jnp.array([1.0, 2.0], dtype)
-    ).as_matrix()
+    out["from_translation"] = jaxlie.SE2.from_translation(jnp.array([1.0, 2.0], dtype)).as_matrix()
     out["from_rotation"] = jaxlie.SE3.from_rotation(jaxlie.SO3.from_z_radians(0.3)).as_matrix()
     out["normalize"] = jaxlie.SO3(jnp.array([2.0, 0.0, 0.0, 0.0], dtype)).normalize().wxyz
     # Optimisation on the manifold, as in jaxlie's docs.
@@ -651,22 +579,20 @@ def _api_tour_program(jaxlie, dtype):
     out["zero_tangents"] = jax.tree.leaves(jaxlie.manifold.zero_tangents(tree))
     out["normalize_all"] = jaxlie.manifold.normalize_all(tree)["pose"].parameters()
     out["rplus_jac"] = jaxlie.manifold.rplus_jacobian_parameters_wrt_delta(T0)
-    out["eps"] = jnp.array(
-        [jaxlie.utils.get_epsilon(jnp.dtype(d)) for d in ("float32", "float64")]
-    )
-    a, b = jaxlie.utils.broadcast_leading_axes(
-        (jaxlie.SO3.identity((3, 1)), jnp.zeros((1, 4, 3)))
-    )
+    out["eps"] = jnp.array([jaxlie.utils.get_epsilon(jnp.dtype(d)) for d in ("float32", "float64")])
+    a, b = jaxlie.utils.broadcast_leading_axes((jaxlie.SO3.identity((3, 1)), jnp.zeros((1, 4, 3))))
     out["broadcast"] = jnp.array([*a.get_batch_axes(), *b.shape])
     return out
 
 
 @pytest.mark.parametrize(
-    "program", [_readme_program, _odometry_program, _api_tour_program],
+    "program",
+    [_readme_program, _odometry_program, _api_tour_program],
     ids=["readme", "odometry", "api_tour"],
 )
 @over_dtypes
 def test_user_program_gives_same_numbers(program, dtype):
+    """Whole user programs written against jaxlie give the same numbers with either module."""
     ours = program(jaxlie_geo, dtype)
     ref = program(jaxlie_ref, dtype)
     assert ours.keys() == ref.keys()

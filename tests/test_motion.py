@@ -1,4 +1,5 @@
-"""jaxlie_geo.motion: constant body velocity between poses (seed 000 §5–§9, seed 002).
+"""jaxlie_geo.motion: constant body velocity between poses (Zhang, *A Geometric Introduction
+to Lie Theory* (2022), §5–§9; the time-scaled logarithm ln_τ R of SO(3)).
 
 A body with constant body-frame velocity ξ follows T(t) = T₀ exp(t ξ), the solution of the
 ODE dT/dt = T hat(ξ). ``velocity_between(a, b, T)`` = log(a⁻¹ b)/T and
@@ -6,18 +7,21 @@ ODE dT/dt = T hat(ξ). ``velocity_between(a, b, T)`` = log(a⁻¹ b)/T and
 
 * round trips for every group (batched, negative durations, numpy-style broadcasting of
   durations and times, as ``interpolate`` does);
-* seed 002's time-scaled log ln_τ R (trace/skew-part formulas) for SO(3);
-* seed 000 §5: the SE(2) arc both ways, with the README's correction (chord
-  AB = (R − I)·OA), and the §5.4 worked example v = (π/4)(1, −1) at θ = π/2, t = (1, 0);
-* the duck game (§6.5) against a direct RK4 integration of dT/dt = T hat(ξ) on the
-  homogeneous matrix, for SE(2) and SE(3), including rotations far beyond π;
+* the time-scaled logarithm ln_τ R of SO(3) from the trace and the skew part, and the
+  time-scaled Rodrigues formula exp(ŵ τ) it inverts;
+* Zhang (2022), §5: the SE(2) arc both ways, with the chord corrected (AB = (R − I)·OA;
+  the text has I − R), and the §5.4 worked example v = (π/4)(1, −1) at θ = π/2, t = (1, 0)
+  (the text prints (π/4)(1, 1), a consequence of the same slip);
+* the duck game (Zhang (2022), §6.5) against a direct RK4 integration of
+  dT/dt = T hat(ξ) on the homogeneous matrix, for the SE groups, and rotations far beyond π
+  for every group;
 * geodesic == constant-velocity path;
-* the two SE(3) translation kernels (``form='textbook'`` and ``'seed000'``) agree to a few
-  ulp;
+* the two SE(3) translation kernels (``form='textbook'`` and ``'axis_split'``) agree to a
+  few ulp;
 * zero durations, type errors, and jit / vmap / grad.
 
-Conventions: tangents follow jaxlie — SE2 ``(vx, vy, ω)``, SE3 ``(v, ω)`` — not the seeds'
-rotation-first order (Eberly).
+Conventions: tangents follow jaxlie — SE2 ``(vx, vy, ω)``, SE3 ``(v, ω)`` — not the
+rotation-first order of Eberly, *Lie Groups and Lie Algebras* (Geometric Tools, 2024).
 """
 
 from __future__ import annotations
@@ -32,16 +36,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import LAYOUT, hat_ref, is_se, over_groups, over_se_groups, rotation_params
 from scipy.linalg import expm
 
-jax.config.update("jax_enable_x64", True)  # also done by conftest; harmless twice
+import jaxlie_geo as jlg
+from jaxlie_geo import SE2, SE3, SO2, SO3, motion
+from jaxlie_geo._se3 import exp_translation, log_translation
+from jaxlie_geo._so3 import log_quaternion_parts
 
-import jaxlie_geo as jlg  # noqa: E402
-from jaxlie_geo import SE2, SE3, SO2, SO3, motion  # noqa: E402
-from jaxlie_geo._se3 import exp_translation, log_translation  # noqa: E402
-from jaxlie_geo._so3 import log_quaternion_parts  # noqa: E402
-
-GROUPS = [SO2, SE2, SO3, SE3]
 ROOT = Path(__file__).resolve().parents[1]
 EPS = np.finfo(np.float64).eps
 
@@ -52,13 +54,13 @@ EPS = np.finfo(np.float64).eps
 def _params(G, seed: int, batch=()) -> np.ndarray:
     """Random parameters, drawn in numpy (no compilation); SE translations of size ~3."""
     rng = np.random.default_rng(seed)
-    if G in (SO2, SE2):
+    if rotation_params(G) == 2:
         a = rng.uniform(-np.pi, np.pi, size=batch)
         rot = np.stack([np.cos(a), np.sin(a)], -1)
     else:
         q = rng.normal(size=(*batch, 4))
         rot = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    if G in (SO2, SO3):
+    if not is_se(G):
         return rot
     return np.concatenate([rot, rng.normal(scale=3.0, size=(*batch, G.space_dim))], -1)
 
@@ -71,17 +73,20 @@ def _mat(g) -> np.ndarray:
     """Homogeneous matrix of an element, written out in numpy (independent of the library)."""
     p = np.asarray(g.parameters(), dtype=np.float64)
     G = type(g)
-    if G in (SO2, SE2):
+    if rotation_params(G) == 2:
         R = _so2_mat(np.arctan2(p[..., 1], p[..., 0]))
     else:
         q = p[..., :4] / np.linalg.norm(p[..., :4], axis=-1, keepdims=True)
         w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-        R = np.stack([
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ], -2)
-    if G in (SO2, SO3):
+        R = np.stack(
+            [
+                np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+            ],
+            -2,
+        )
+    if not is_se(G):
         return R
     n = G.space_dim
     M = np.zeros((*p.shape[:-1], n + 1, n + 1))
@@ -94,7 +99,7 @@ def _mat(g) -> np.ndarray:
 def _expm_path(G, M0: np.ndarray, xi: np.ndarray, t) -> np.ndarray:
     """Reference M0 · expm(t hat(ξ)) (scipy), broadcasting M0, ξ and t."""
     t = np.asarray(t, dtype=np.float64)
-    X = _hat_np(G, np.asarray(xi, dtype=np.float64))
+    X = hat_ref(G, np.asarray(xi, dtype=np.float64))
     X = t[..., None, None] * X
     shape = np.broadcast_shapes(M0.shape[:-2], X.shape[:-2])
     X = np.broadcast_to(X, (*shape, *X.shape[-2:])).reshape(-1, *X.shape[-2:])
@@ -112,7 +117,7 @@ def _assert_same_pose(a, b, atol=1e-12, rtol=0.0):
 
 def _rot(G) -> slice:
     """The rotational part of a tangent."""
-    return {SO2: slice(0, 1), SE2: slice(2, 3), SO3: slice(0, 3), SE3: slice(3, 6)}[G]
+    return LAYOUT[G][0]
 
 
 def _rng_velocity(G, rng, n, max_angle_rate=None):
@@ -123,34 +128,6 @@ def _rng_velocity(G, rng, n, max_angle_rate=None):
         target = rng.uniform(0.05, 1.0, size=(n, 1)) * max_angle_rate
         xi[:, _rot(G)] = w / np.linalg.norm(w, axis=1, keepdims=True) * target
     return xi
-
-
-def _hat_np(G, xi: np.ndarray) -> np.ndarray:
-    """se(n) / so(n) matrix of a tangent (written out here, independent of the library)."""
-    xi = np.asarray(xi, dtype=np.float64)
-    out_shape = xi.shape[:-1]
-    if G is SE2:
-        vx, vy, w = xi[..., 0], xi[..., 1], xi[..., 2]
-        M = np.zeros((*out_shape, 3, 3))
-        M[..., 0, 1], M[..., 1, 0] = -w, w
-        M[..., 0, 2], M[..., 1, 2] = vx, vy
-        return M
-    if G is SO2:
-        w = xi[..., 0]
-        M = np.zeros((*out_shape, 2, 2))
-        M[..., 0, 1], M[..., 1, 0] = -w, w
-        return M
-    w = xi[..., -3:]
-    W = np.zeros((*out_shape, 3, 3))
-    W[..., 0, 1], W[..., 0, 2] = -w[..., 2], w[..., 1]
-    W[..., 1, 0], W[..., 1, 2] = w[..., 2], -w[..., 0]
-    W[..., 2, 0], W[..., 2, 1] = -w[..., 1], w[..., 0]
-    if G is SO3:
-        return W
-    M = np.zeros((*out_shape, 4, 4))
-    M[..., :3, :3] = W
-    M[..., :3, 3] = xi[..., :3]
-    return M
 
 
 def _rk4(M0: np.ndarray, Xi: np.ndarray, h: float, n_steps: int, record: list) -> dict:
@@ -183,8 +160,10 @@ def _so2_mat(angle) -> np.ndarray:
 N = 8  # batch size used throughout (one compilation per shape)
 
 
-@pytest.mark.parametrize("G", GROUPS, ids=lambda G: G.__name__)
+@over_groups
 def test_round_trip_batched(G):
+    """pose_at(a, velocity_between(a, b, T), T) == b for a batch with negative durations and for
+    a scalar duration; along the way the path is a · expm(t hat(ξ)) (scipy)."""
     a, b = _sample(G, 1, (N,)), _sample(G, 2, (N,))
     T = np.random.default_rng(3).uniform(0.2, 5.0, size=N) * np.where(np.arange(N) % 2, -1, 1)
     xi = motion.velocity_between(a, b, jnp.asarray(T))  # half of the durations negative
@@ -192,16 +171,19 @@ def test_round_trip_batched(G):
     _assert_same_pose(motion.pose_at(a, xi, jnp.asarray(T)), b, atol=1e-11)
     # The path is a exp(t ξ): compare with scipy's matrix exponential along the way.
     for t in (0.4, -1.3):
-        _assert_same_pose(motion.pose_at(a, xi, t), _expm_path(G, _mat(a), np.asarray(xi), t),
-                          atol=1e-11)
+        _assert_same_pose(
+            motion.pose_at(a, xi, t), _expm_path(G, _mat(a), np.asarray(xi), t), atol=1e-11
+        )
     # A scalar duration; at t = 0 the body is at the start.
     xi2 = motion.velocity_between(a, b, 2.5)
     _assert_same_pose(motion.pose_at(a, xi2, 2.5), b, atol=1e-11)
     _assert_same_pose(motion.pose_at(a, xi2, 0.0), a, atol=1e-15)
 
 
-@pytest.mark.parametrize("G", GROUPS, ids=lambda G: G.__name__)
+@over_groups
 def test_negative_duration_runs_backwards(G):
+    """A negative duration negates the velocity, and running a velocity backwards in time
+    retraces the same path (pose_at(a, ξ, −t) == pose_at(a, −ξ, t))."""
     a, b = _sample(G, 4, (N,)), _sample(G, 5, (N,))
     xi = motion.velocity_between(a, b, 3.0)
     np.testing.assert_array_equal(np.asarray(motion.velocity_between(a, b, -3.0)), -np.asarray(xi))
@@ -216,7 +198,7 @@ def test_negative_duration_runs_backwards(G):
         _assert_same_pose(motion.pose_at(b, back, t), motion.pose_at(a, xi, 3.0 - t), atol=1e-11)
 
 
-@pytest.mark.parametrize("G", GROUPS, ids=lambda G: G.__name__)
+@over_groups
 def test_broadcasting_like_interpolate_and_geodesic(G):
     """Times broadcast numpy-style against the batch axes exactly as in ``interpolate``, and
     the geodesic is the constant-velocity path: a.interpolate(b, t) ==
@@ -232,8 +214,9 @@ def test_broadcasting_like_interpolate_and_geodesic(G):
         got = motion.pose_at(start, xi, t)
         ref = start.interpolate(end, t)
         assert got.get_batch_axes() == shape == ref.get_batch_axes()
-        np.testing.assert_allclose(np.asarray(got.parameters()), np.asarray(ref.parameters()),
-                                   **ulp)
+        np.testing.assert_allclose(
+            np.asarray(got.parameters()), np.asarray(ref.parameters()), **ulp
+        )
         ref_m = _expm_path(G, _mat(start), np.asarray(xi), np.asarray(t))
         _assert_same_pose(got, ref_m, atol=1e-11)
         return xi
@@ -248,10 +231,12 @@ def test_broadcasting_like_interpolate_and_geodesic(G):
     # The Geodesic object: its tangent is the velocity over unit time (1/T otherwise).
     geo = jlg.geodesic(a, b)
     via_motion = motion.pose_at(a, xi, jnp.asarray(ts))
-    np.testing.assert_allclose(np.asarray(geo(jnp.asarray(ts)).parameters()),
-                               np.asarray(via_motion.parameters()), **ulp)
-    np.testing.assert_allclose(np.asarray(geo.tangent) / 4.0,
-                               np.asarray(motion.velocity_between(a, b, 4.0)), rtol=1e-15)
+    np.testing.assert_allclose(
+        np.asarray(geo(jnp.asarray(ts)).parameters()), np.asarray(via_motion.parameters()), **ulp
+    )
+    np.testing.assert_allclose(
+        np.asarray(geo.tangent) / 4.0, np.asarray(motion.velocity_between(a, b, 4.0)), rtol=1e-15
+    )
     # Unbatched start, batched velocities.
     fan = motion.pose_at(G.identity(), xi, 1.0)
     assert fan.get_batch_axes() == (N,)
@@ -259,9 +244,12 @@ def test_broadcasting_like_interpolate_and_geodesic(G):
     # Durations broadcast too: one pair, K durations -> (K, tangent_dim).
     xik = motion.velocity_between(a[0], b[0], jnp.asarray(ts + 3.0))
     assert xik.shape == (N, G.tangent_dim)
-    np.testing.assert_allclose(np.asarray(xik) * (ts + 3.0)[:, None],
-                               np.broadcast_to(np.asarray(xi)[0], (N, G.tangent_dim)),
-                               rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(
+        np.asarray(xik) * (ts + 3.0)[:, None],
+        np.broadcast_to(np.asarray(xi)[0], (N, G.tangent_dim)),
+        rtol=1e-14,
+        atol=1e-15,
+    )
     # Endpoints broadcast: one start, a batch of ends.
     xib = motion.velocity_between(a[0], b, 1.0)
     assert xib.shape == (N, G.tangent_dim)
@@ -270,26 +258,29 @@ def test_broadcasting_like_interpolate_and_geodesic(G):
     _assert_same_pose(motion.pose_at(a, motion.velocity_between(a, b, 2), 2), b, atol=1e-11)
 
 
-# --- seed 002: the time-scaled logarithm ---------------------------------------------------
+# --- the time-scaled logarithm of SO(3) -----------------------------------------------------
 
 
-def _ln_tau_seed002(R: np.ndarray, tau: float) -> np.ndarray:
-    """Seed 002's ln_τ R from the trace and the skew part (with its slip fixed: ω = σ n)."""
+def _ln_tau(R: np.ndarray, tau: float) -> np.ndarray:
+    """The time-scaled logarithm ln_τ R from the trace and the skew part: σ = arccos((tr R −
+    1)/2)/τ, n = vee(R − Rᵀ)/(2 sin στ), ω = σ n (the notes it comes from write ω = τ n)."""
     sigma = np.arccos((np.trace(R) - 1.0) / 2.0) / tau
     S = R - R.T
     n = np.array([S[2, 1], S[0, 2], S[1, 0]]) / (2.0 * np.sin(sigma * tau))
     return sigma * n
 
 
-def _rodrigues_seed002(w: np.ndarray, tau: float) -> np.ndarray:
-    """e^{ŵτ} = I + ŵ/‖w‖ sin(‖w‖τ) + ŵ²/‖w‖² (1 − cos(‖w‖τ)) (ŵ² in the last term: the
-    seed's last line has ŵ)."""
-    W = _hat_np(SO3, w)
+def _rodrigues(w: np.ndarray, tau: float) -> np.ndarray:
+    """The time-scaled Rodrigues formula e^{ŵτ} = I + ŵ/‖w‖ sin(‖w‖τ) + ŵ²/‖w‖² (1 −
+    cos(‖w‖τ)) (ŵ² in the last term; the notes it comes from print ŵ)."""
+    W = hat_ref(SO3, w)
     s = np.linalg.norm(w)
     return np.eye(3) + W / s * np.sin(s * tau) + W @ W / s**2 * (1.0 - np.cos(s * tau))
 
 
-def test_velocity_between_is_seed002_time_scaled_log():
+def test_velocity_between_is_the_time_scaled_log():
+    """velocity_between(I, R, τ) is ln_τ R (trace and skew part) for R = e^{ŵτ} (time-scaled
+    Rodrigues), and pose_at inverts it; the SO(2) analogue recovers ω from exp(ωτ)."""
     rng = np.random.default_rng(10)
     I = SO3.identity()
     for _ in range(25):
@@ -298,11 +289,11 @@ def test_velocity_between_is_seed002_time_scaled_log():
         axis /= np.linalg.norm(axis)
         angle = rng.uniform(0.05, 3.0)  # ‖ω‖ τ < π: the principal branch
         w = axis * angle / tau
-        R = _rodrigues_seed002(w, tau)
+        R = _rodrigues(w, tau)
         got = np.asarray(motion.velocity_between(I, SO3.from_matrix(jnp.asarray(R)), tau))
         np.testing.assert_allclose(got, w, rtol=1e-12, atol=1e-13)
-        np.testing.assert_allclose(got, _ln_tau_seed002(R, tau), rtol=1e-9, atol=1e-12)
-        # e^{(ln_τ R) τ} = R (seed 002's last line), via pose_at.
+        np.testing.assert_allclose(got, _ln_tau(R, tau), rtol=1e-9, atol=1e-12)
+        # e^{(ln_τ R) τ} = R, via pose_at.
         np.testing.assert_allclose(_mat(motion.pose_at(I, got, tau)), R, atol=1e-14)
     # SO(2) analogue: R = exp(ω τ) -> ω for |ω τ| < π.
     for w, tau in [(0.3, 2.0), (-1.4, 2.1), (2.0, 1.5), (-0.001, 7.0)]:
@@ -310,17 +301,16 @@ def test_velocity_between_is_seed002_time_scaled_log():
         np.testing.assert_allclose(np.asarray(got), [w], rtol=1e-13)
 
 
-# --- seed 000 §5: arcs in SE(2) --------------------------------------------------------------
+# --- Zhang (2022), §5: arcs in SE(2) ---------------------------------------------------------
 
 
-def test_seed000_5_4_worked_example():
-    """θ = π/2, t = (1, 0), T = 1: v = (π/4)(1, −1), ω = π/2 (the seed prints (π/4)(1, 1),
-    a consequence of its (I − R) chord slip; see shared/seeds/README.md)."""
+def test_zhang_5_4_worked_example():
+    """Zhang (2022), §5.4: θ = π/2, t = (1, 0), T = 1 gives v = (π/4)(1, −1), ω = π/2 (the
+    text prints (π/4)(1, 1), a consequence of its (I − R) chord slip in §5.1)."""
     target = SE2.from_xy_theta(1.0, 0.0, math.pi / 2)
     xi = np.asarray(motion.velocity_between(SE2.identity(), target, 1.0))
-    np.testing.assert_allclose(xi, [math.pi / 4, -math.pi / 4, math.pi / 2], rtol=1e-15,
-                               atol=1e-16)
-    assert not np.allclose(xi[:2], [math.pi / 4, math.pi / 4])  # the seed's slip
+    np.testing.assert_allclose(xi, [math.pi / 4, -math.pi / 4, math.pi / 2], rtol=1e-15, atol=1e-16)
+    assert not np.allclose(xi[:2], [math.pi / 4, math.pi / 4])  # the text's slip
     # Twice the time, half the velocity.
     xi2 = np.asarray(motion.velocity_between(SE2.identity(), target, 2.0))
     np.testing.assert_allclose(xi2, xi / 2, rtol=1e-15)
@@ -330,8 +320,8 @@ def test_seed000_5_4_worked_example():
     np.testing.assert_allclose(np.asarray(arc.centre), [0.5, 0.5], atol=1e-15)
 
 
-def test_seed000_5_3_geometric_pose_to_velocity():
-    """§5.3's geometric answer (correct as printed):
+def test_zhang_5_3_geometric_pose_to_velocity():
+    """Zhang (2022), §5.3's geometric answer (correct as printed):
     v = θ/(2T) ((t_y, −t_x) + cot(θ/2) (t_x, t_y)), ω = θ/T."""
     rng = np.random.default_rng(11)
     for _ in range(30):
@@ -343,9 +333,9 @@ def test_seed000_5_3_geometric_pose_to_velocity():
         np.testing.assert_allclose(np.asarray(got), [*v, theta / T], rtol=1e-12, atol=1e-13)
 
 
-def test_seed000_5_1_chord_corrected():
-    """§5.1 with the README's fix: from the identity, AB = (R(Tω) − I)·OA with
-    OA = (1/ω)(v_y, −v_x) (centre to start), heading Tω."""
+def test_zhang_5_1_chord_corrected():
+    """Zhang (2022), §5.1 with the chord corrected (the text has I − R): from the identity,
+    AB = (R(Tω) − I)·OA with OA = (1/ω)(v_y, −v_x) (centre to start), heading Tω."""
     rng = np.random.default_rng(12)
     for _ in range(30):
         vx, vy = rng.normal(size=2)
@@ -355,8 +345,9 @@ def test_seed000_5_1_chord_corrected():
         AB = (_so2_mat(T * w) - np.eye(2)) @ OA
         g = motion.pose_at(SE2.identity(), jnp.array([vx, vy, w]), T)
         np.testing.assert_allclose(np.asarray(g.translation()), AB, atol=1e-12)
-        np.testing.assert_allclose(np.asarray(g.rotation().as_matrix()), _so2_mat(T * w),
-                                   atol=1e-14)
+        np.testing.assert_allclose(
+            np.asarray(g.rotation().as_matrix()), _so2_mat(T * w), atol=1e-14
+        )
 
 
 def test_arc_velocity_to_pose():
@@ -373,10 +364,12 @@ def test_arc_velocity_to_pose():
     w = xi[:, 2]
     # Radius, curvature, heading, speed.
     np.testing.assert_allclose(np.linalg.norm(p0 - c, axis=1), np.asarray(arc.radius), rtol=1e-13)
-    np.testing.assert_allclose(np.asarray(arc.radius), np.linalg.norm(xi[:, :2], axis=1) / abs(w),
-                               rtol=1e-14)
-    np.testing.assert_allclose(np.asarray(arc.curvature),
-                               w / np.linalg.norm(xi[:, :2], axis=1), rtol=1e-14)
+    np.testing.assert_allclose(
+        np.asarray(arc.radius), np.linalg.norm(xi[:, :2], axis=1) / abs(w), rtol=1e-14
+    )
+    np.testing.assert_allclose(
+        np.asarray(arc.curvature), w / np.linalg.norm(xi[:, :2], axis=1), rtol=1e-14
+    )
     u = np.einsum("nij,nj->ni", _so2_mat(theta0), xi[:, :2])  # world-frame velocity
     np.testing.assert_allclose(np.asarray(arc.heading), np.arctan2(u[:, 1], u[:, 0]), atol=1e-14)
     np.testing.assert_allclose(np.asarray(arc.speed), np.linalg.norm(u, axis=1), rtol=1e-14)
@@ -386,8 +379,9 @@ def test_arc_velocity_to_pose():
         g = motion.pose_at(start, jnp.asarray(xi), t)
         pos = c + np.einsum("nij,nj->ni", _so2_mat(w * t), p0 - c)
         np.testing.assert_allclose(np.asarray(g.translation()), pos, atol=1e-11)
-        np.testing.assert_allclose(np.asarray(g.rotation().as_matrix()),
-                                   _so2_mat(theta0 + w * t), atol=1e-13)
+        np.testing.assert_allclose(
+            np.asarray(g.rotation().as_matrix()), _so2_mat(theta0 + w * t), atol=1e-13
+        )
 
 
 @pytest.mark.parametrize("turn", [1.0, -1.0], ids=["ccw", "cw"])
@@ -404,7 +398,7 @@ def test_arc_pose_to_velocity(turn):
         delta = turn * rng.uniform(0.05, 3.0)  # swept angle, |Δ| < π
         T = rng.uniform(0.2, 8.0)
 
-        def pose(phi):
+        def pose(phi, c=c, r=r, alpha=alpha):
             p = c + r * np.array([np.cos(phi), np.sin(phi)])
             travel = turn * np.array([-np.sin(phi), np.cos(phi)])
             return SE2.from_xy_theta(p[0], p[1], np.arctan2(travel[1], travel[0]) + alpha)
@@ -412,15 +406,17 @@ def test_arc_pose_to_velocity(turn):
         A, B = pose(phi0), pose(phi0 + delta)
         xi = np.asarray(motion.velocity_between(A, B, T))
         speed = r * abs(delta) / T
-        np.testing.assert_allclose(xi, [speed * np.cos(-alpha), speed * np.sin(-alpha), delta / T],
-                                   rtol=1e-10, atol=1e-11)
+        np.testing.assert_allclose(
+            xi, [speed * np.cos(-alpha), speed * np.sin(-alpha), delta / T], rtol=1e-10, atol=1e-11
+        )
         arc = motion.arc(A, jnp.asarray(xi))
         np.testing.assert_allclose(np.asarray(arc.centre), c, atol=1e-10 * (1 + r))
         np.testing.assert_allclose(float(arc.radius), r, rtol=1e-11)
         np.testing.assert_allclose(float(arc.curvature), turn / r, rtol=1e-11)
         travel0 = turn * np.array([-np.sin(phi0), np.cos(phi0)])
-        np.testing.assert_allclose(np.cos(float(arc.heading) - np.arctan2(travel0[1], travel0[0])),
-                                   1.0, atol=1e-12)
+        np.testing.assert_allclose(
+            np.cos(float(arc.heading) - np.arctan2(travel0[1], travel0[0])), 1.0, atol=1e-12
+        )
         # Negative duration: the reversed velocity describes the same circle.
         arc_back = motion.arc(A, motion.velocity_between(A, B, -T))
         np.testing.assert_allclose(np.asarray(arc_back.centre), c, atol=1e-10 * (1 + r))
@@ -428,12 +424,17 @@ def test_arc_pose_to_velocity(turn):
         # Midway in time is midway on the circle.
         mid = motion.pose_at(A, jnp.asarray(xi), T / 2)
         phi_mid = phi0 + delta / 2
-        np.testing.assert_allclose(np.asarray(mid.translation()),
-                                   c + r * np.array([np.cos(phi_mid), np.sin(phi_mid)]),
-                                   atol=1e-10 * (1 + r))
+        np.testing.assert_allclose(
+            np.asarray(mid.translation()),
+            c + r * np.array([np.cos(phi_mid), np.sin(phi_mid)]),
+            atol=1e-10 * (1 + r),
+        )
 
 
 def test_arc_straight_line_and_turning_on_the_spot():
+    """The documented limits of ``motion.arc``: a straight line (curvature 0, radius inf), turning
+    on the spot (curvature ±inf, radius 0), standing still; zero gradients where the speed is
+    0, and no NaN from the guards in a batch that mixes the cases."""
     start = SE2.from_xy_theta(1.0, -2.0, 0.7)
     R0 = _so2_mat(0.7)
     # Straight line (ω = 0): documented curvature 0, radius inf, centre = start.
@@ -477,7 +478,7 @@ def test_arc_straight_line_and_turning_on_the_spot():
     # Gradients at zero speed are 0 (the subgradient), not NaN from √0 and atan2(0, 0).
     for v in (jnp.zeros(3), jnp.array([0.0, 0.0, 0.7])):
         for field in ("speed", "heading", "curvature"):
-            g = jax.grad(lambda v: getattr(motion.arc(start, v), field))(v)
+            g = jax.grad(lambda v, field=field: getattr(motion.arc(start, v), field))(v)
             np.testing.assert_array_equal(np.asarray(g), 0.0)
     g = jax.grad(lambda v: motion.arc(start, v).speed)(jnp.array([0.3, 0.4, 0.0]))
     np.testing.assert_allclose(np.asarray(g), [0.6, 0.8, 0.0], atol=1e-15)
@@ -491,6 +492,7 @@ def test_arc_straight_line_and_turning_on_the_spot():
 
 
 def test_arc_rejects_other_groups():
+    """``motion.arc`` is for SE2 alone: another group raises TypeError."""
     with pytest.raises(TypeError):
         motion.arc(SE3.identity(), jnp.zeros(6))
 
@@ -498,27 +500,28 @@ def test_arc_rejects_other_groups():
 # --- the duck game vs a directly integrated path -------------------------------------------
 
 
-@pytest.mark.parametrize("G", [SE2, SE3], ids=lambda G: G.__name__)
+@over_se_groups
 def test_duck_game_against_rk4(G):
-    """Seed 000 §6.5: the duck leaves G₀ at constant body velocity; from G₀ and the
-    (integrated) G₈ we recover the velocity and the pose at t = 3."""
+    """Zhang (2022), §6.5, a game of poses: the duck leaves G₀ at constant body velocity;
+    from G₀ and the (RK4-integrated) G₈ we recover the velocity and the pose at t = 3."""
     rng = np.random.default_rng(20 if G is SE2 else 21)
     n = 6
     # ‖ω‖ · 8 < π: the turn over the game is on the principal branch.
     xi = _rng_velocity(G, rng, n, max_angle_rate=0.37)
     g0 = _sample(G, 22, (n,))
     h = 1e-3
-    path = _rk4(_mat(g0), _hat_np(G, xi), h, 8000, [3000, 8000])
+    path = _rk4(_mat(g0), hat_ref(G, xi), h, 8000, [3000, 8000])
     g8 = G.from_matrix(jnp.asarray(path[8000]))
     xi_hat = np.asarray(motion.velocity_between(g0, g8, 8.0))
     np.testing.assert_allclose(xi_hat, xi, atol=1e-11)
     g3 = motion.pose_at(g0, jnp.asarray(xi_hat), 3.0)
     np.testing.assert_allclose(_mat(g3), path[3000], atol=1e-9, rtol=0)
-    np.testing.assert_allclose(_mat(motion.pose_at(g0, jnp.asarray(xi), 8.0)), path[8000],
-                               atol=1e-9, rtol=0)
+    np.testing.assert_allclose(
+        _mat(motion.pose_at(g0, jnp.asarray(xi), 8.0)), path[8000], atol=1e-9, rtol=0
+    )
 
 
-@pytest.mark.parametrize("G", [SE2, SO3, SE3], ids=lambda G: G.__name__)
+@over_groups
 def test_long_motion_beyond_pi_against_rk4(G):
     """Rotation angles far beyond π (an SE(3) helix of several turns, a long duration):
     pose_at follows the turns, and agrees with RK4 all along the path."""
@@ -532,19 +535,20 @@ def test_long_motion_beyond_pi_against_rk4(G):
     g0 = _sample(G, 31, (n,))
     h, T = 1e-3, 24.0  # 48 rad ≈ 7.6 turns
     steps = [3000, 7000, 12000, 24000]
-    path = _rk4(_mat(g0), _hat_np(G, xi), h, 24000, steps)
+    path = _rk4(_mat(g0), hat_ref(G, xi), h, 24000, steps)
     for k in steps:
         g = motion.pose_at(g0, jnp.asarray(xi), k * h)
         np.testing.assert_allclose(_mat(g), path[k], atol=1e-9, rtol=0)
     if G is SE3:
         # The helix climbs 0.3 m/s along its axis (z in the body frame of the start).
-        p = np.asarray((g0[0].inverse() @ motion.pose_at(g0[0], jnp.asarray(xi[0]), T))
-                       .translation())
+        p = np.asarray(
+            (g0[0].inverse() @ motion.pose_at(g0[0], jnp.asarray(xi[0]), T)).translation()
+        )
         assert p[2] == pytest.approx(0.3 * T, abs=1e-12)
         assert np.hypot(p[0], p[1] - 0.5) == pytest.approx(0.5, abs=1e-12)
     # With a probe after 1 s (turn 2 rad < π), velocity_between recovers the velocity and
     # pose_at then follows all 24 s.
-    g1 = G.from_matrix(jnp.asarray(_rk4(_mat(g0), _hat_np(G, xi), h, 1000, [1000])[1000]))
+    g1 = G.from_matrix(jnp.asarray(_rk4(_mat(g0), hat_ref(G, xi), h, 1000, [1000])[1000]))
     xi_hat = motion.velocity_between(g0, g1, 1.0)
     np.testing.assert_allclose(np.asarray(xi_hat), xi, atol=1e-11)
     np.testing.assert_allclose(_mat(motion.pose_at(g0, xi_hat, T)), path[24000], atol=1e-9)
@@ -559,7 +563,7 @@ def test_long_motion_beyond_pi_against_rk4(G):
 @pytest.mark.parametrize("dtype", [np.float64])  # float32 accuracy: test_accuracy.py
 @pytest.mark.parametrize("theta", [0.0, 1e-8, 1e-3, 1.0, 3.1, 9.0])
 def test_se3_exp_translation_forms_agree(theta, dtype):
-    """t = V(ω) v: 'textbook' and 'seed000' agree to a few ulp of |v| (the size of the terms;
+    """t = V(ω) v: 'textbook' and 'axis_split' agree to a few ulp of |v| (the size of the terms;
     the textbook form cancels to the shorter t beyond π)."""
     rng = np.random.default_rng(50)
     n = 500
@@ -568,7 +572,7 @@ def test_se3_exp_translation_forms_agree(theta, dtype):
     w = (axis * theta).astype(dtype)
     v = (rng.normal(size=(n, 3)) * rng.choice([1e-3, 1.0, 1e3], size=(n, 1))).astype(dtype)
     a = np.asarray(exp_translation(jnp.asarray(v), jnp.asarray(w), "textbook"))
-    b = np.asarray(exp_translation(jnp.asarray(v), jnp.asarray(w), "seed000"))
+    b = np.asarray(exp_translation(jnp.asarray(v), jnp.asarray(w), "axis_split"))
     assert a.dtype == b.dtype == dtype
     eps = np.finfo(dtype).eps
     diff = a.astype(np.float64) - b
@@ -593,7 +597,7 @@ def test_se3_log_translation_forms_agree(theta, dtype):
     t = (rng.normal(size=(n, 3)) * rng.choice([1e-3, 1.0, 1e3], size=(n, 1))).astype(dtype)
     u, s, hh = log_quaternion_parts(jnp.asarray(q))
     a = np.asarray(log_translation(jnp.asarray(t), u, s, hh, "textbook")).astype(np.float64)
-    b = np.asarray(log_translation(jnp.asarray(t), u, s, hh, "seed000")).astype(np.float64)
+    b = np.asarray(log_translation(jnp.asarray(t), u, s, hh, "axis_split")).astype(np.float64)
     eps = np.finfo(dtype).eps
     scale = np.maximum(np.linalg.norm(t.astype(np.float64), axis=1), np.linalg.norm(b, axis=1))
     err = np.linalg.norm(a - b, axis=1) / scale
@@ -603,21 +607,27 @@ def test_se3_log_translation_forms_agree(theta, dtype):
 # --- errors ----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("zero", [0.0, 0, -0.0, np.float32(0.0), jnp.array([1.0, 0.0, 2.0])],
-                         ids=["float", "int", "negzero", "f32", "array-with-zero"])
+@pytest.mark.parametrize(
+    "zero",
+    [0.0, 0, -0.0, np.float32(0.0), jnp.array([1.0, 0.0, 2.0])],
+    ids=["float", "int", "negzero", "f32", "array-with-zero"],
+)
 def test_zero_duration_raises(zero):
+    """A zero duration (any type, or one zero in an array) raises ValueError eagerly."""
     a, b = _sample(SE3, 60, (3,)), _sample(SE3, 61, (3,))
     with pytest.raises(ValueError, match="non-zero"):
         motion.velocity_between(a, b, zero)
 
 
 def test_traced_zero_duration_gives_non_finite():
+    """Under jit a zero duration cannot be checked: the velocity is not finite."""
     a, b = _sample(SE2, 62), _sample(SE2, 63)
     xi = jax.jit(motion.velocity_between)(a, b, 0.0)
     assert not np.all(np.isfinite(np.asarray(xi)))
 
 
 def test_mismatched_groups_and_shapes_raise():
+    """Endpoints of different groups raise TypeError; a velocity of the wrong size ValueError."""
     with pytest.raises(TypeError):
         motion.velocity_between(SE2.identity(), SO2.identity(), 1.0)
     with pytest.raises(ValueError):
@@ -627,7 +637,7 @@ def test_mismatched_groups_and_shapes_raise():
 # --- transformations -------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("G", GROUPS, ids=lambda G: G.__name__)
+@over_groups
 def test_jit_vmap_grad(G):
     """jit(vmap(...)) of velocity_between + pose_at equals the eager batched result; the
     gradients through both (w.r.t. endpoints, duration and time) are finite, also where
@@ -658,9 +668,10 @@ def test_jit_vmap_grad(G):
     _assert_same_pose(np.asarray(p), p_e, atol=1e-13)
     np.testing.assert_allclose(np.asarray(v_e)[0], 0.0, atol=1e-15)  # a⁻¹a rounds
     # d/dT (log/T) = −ξ/T, and d/dt a exp(tξ) = a exp(tξ) hat(ξ) (the body-velocity ODE).
-    np.testing.assert_allclose(np.asarray(dv), -np.asarray(v) / np.asarray(T)[:, None],
-                               rtol=1e-13, atol=1e-15)
-    expected = _expm_path(G, _mat(a), np.asarray(v), np.asarray(t)) @ _hat_np(G, np.asarray(v))
+    np.testing.assert_allclose(
+        np.asarray(dv), -np.asarray(v) / np.asarray(T)[:, None], rtol=1e-13, atol=1e-15
+    )
+    expected = _expm_path(G, _mat(a), np.asarray(v), np.asarray(t)) @ hat_ref(G, np.asarray(v))
     np.testing.assert_allclose(np.asarray(dM), expected, atol=1e-11)
 
     # Reverse mode, w.r.t. both endpoints, the duration and the time (the batch elements are
@@ -675,10 +686,16 @@ def test_jit_vmap_grad(G):
 
 
 def test_duck_game_example_runs(tmp_path):
+    """``examples/duck_game.py`` runs, prints the pose at t = 3 and the body velocity, and
+    writes both PNGs."""
     env = dict(os.environ, MPLBACKEND="Agg", JAX_PLATFORMS="cpu")
     proc = subprocess.run(
         [sys.executable, str(ROOT / "examples" / "duck_game.py"), "--out", str(tmp_path)],
-        capture_output=True, text=True, timeout=120, cwd=ROOT, env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        env=env,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     for name in ("duck_game.png", "duck_game_3d.png"):

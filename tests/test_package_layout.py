@@ -94,8 +94,10 @@ def test_public_modules_list_their_names() -> None:
         missing = [n for n in module.__all__ if not hasattr(module, n)]
         assert not missing, (mod, missing)
         defined = {
-            n for n, v in vars(module).items()
-            if not n.startswith("_") and (inspect.isfunction(v) or inspect.isclass(v))
+            n
+            for n, v in vars(module).items()
+            if not n.startswith("_")
+            and (inspect.isfunction(v) or inspect.isclass(v))
             and v.__module__ == module.__name__
         }
         assert defined <= set(module.__all__), (mod, sorted(defined - set(module.__all__)))

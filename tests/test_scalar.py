@@ -85,9 +85,16 @@ ENVELOPE = {
 
 # Domain of each kernel: exp-side kernels up to θ = 10π; the Jacobian coefficients C2, D
 # up to θ = 3π; G on θ < 2π (pole), mostly used on the principal range θ ≤ π.
-X_MAX = {"cos_": 100 * math.pi**2, "sinc": 100 * math.pi**2, "F1": 100 * math.pi**2,
-         "F2": 100 * math.pi**2, "C2": 9 * math.pi**2, "D": 9 * math.pi**2,
-         "G": (2 * math.pi - 0.3) ** 2, "G_principal": math.pi**2}
+X_MAX = {
+    "cos_": 100 * math.pi**2,
+    "sinc": 100 * math.pi**2,
+    "F1": 100 * math.pi**2,
+    "F2": 100 * math.pi**2,
+    "C2": 9 * math.pi**2,
+    "D": 9 * math.pi**2,
+    "G": (2 * math.pi - 0.3) ** 2,
+    "G_principal": math.pi**2,
+}
 SWITCHES = [1.0, 10.0, 12.0, math.pi**2, 16.0, 30.0]
 
 
@@ -113,8 +120,11 @@ def kernel_errors(name, dtype):
     xs = sample_x(name, dtype)
     d1 = jax.vmap(jax.grad(f))
     d2 = jax.vmap(jax.grad(jax.grad(f)))
-    got = [np.asarray(f(jnp.asarray(xs))), np.asarray(d1(jnp.asarray(xs))),
-           np.asarray(d2(jnp.asarray(xs)))]
+    got = [
+        np.asarray(f(jnp.asarray(xs))),
+        np.asarray(d1(jnp.asarray(xs))),
+        np.asarray(d2(jnp.asarray(xs))),
+    ]
     ref_f = _ref(name)
     eps = float(np.finfo(dtype).eps)
     worst = [0.0, 0.0, 0.0]
@@ -157,8 +167,8 @@ def atan2_over_errors(dtype):
     for i in range(len(n2)):
         a, b = float(n2[i]), float(w[i])
         r = ref(a, b)
-        rn = mp.diff(lambda s: ref(s, b), a)
-        rw = mp.diff(lambda s: ref(a, s), b)
+        rn = mp.diff(lambda s, b=b: ref(s, b), a)
+        rw = mp.diff(lambda s, a=a: ref(a, s), b)
         for k, (g, rr) in enumerate([(got[i], r), (gn[i], rn), (gw[i], rw)]):
             err = abs(float(g) - float(rr)) / (eps * max(abs(float(rr)), 1e-300))
             worst[k] = max(worst[k], err if np.isfinite(g) else math.inf)
@@ -173,6 +183,8 @@ BOUNDS = (4.0, 8.0, 64.0)
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("name", KERNELS)
 def test_kernel_accuracy(name, dtype):
+    """The kernel and its first two derivatives are within ``BOUNDS`` ulp of mpmath over the
+    kernel's test points, and finite."""
     worst = kernel_errors(name, dtype)
     assert all(np.isfinite(worst)), worst
     for order, (w, bound) in enumerate(zip(worst, BOUNDS)):
@@ -181,6 +193,7 @@ def test_kernel_accuracy(name, dtype):
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_atan2_over_accuracy(dtype):
+    """``atan2_over`` and its two partial derivatives are within ``BOUNDS`` ulp of mpmath."""
     worst = atan2_over_errors(dtype)
     assert worst[0] <= BOUNDS[0] and worst[1] <= BOUNDS[1] and worst[2] <= BOUNDS[1], worst
 
@@ -197,9 +210,17 @@ _SERIES = {
     "half_m": lambda k: (-1) ** k * (k + 1) / (4 * _FACT(2 * k + 3)),
     "atan": lambda k: mp.mpf((-1) ** k) / (2 * k + 1),
 }
-_SWITCHES = [("cos", 1.0), ("sinc", 1.0), ("half_m", 1.0), ("F2", 10.0), ("C2", 12.0),
-             ("D", 30.0), ("G", 16.0), ("G", math.pi**2 * (1 + 1e-6)),
-             ("atan", _scalar._ATAN_X_MAX)]
+_SWITCHES = [
+    ("cos", 1.0),
+    ("sinc", 1.0),
+    ("half_m", 1.0),
+    ("F2", 10.0),
+    ("C2", 12.0),
+    ("D", 30.0),
+    ("G", 16.0),
+    ("G", math.pi**2 * (1 + 1e-6)),
+    ("atan", _scalar._ATAN_X_MAX),
+]
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -214,7 +235,7 @@ def test_series_truncation_below_eps_over_8(name, x_max, dtype):
     for order in range(3):
         terms = [coef(j) * mp.ff(j, order) * x ** (j - order) for j in range(order, 400)]
         value = mp.fsum(terms)
-        tail = mp.fsum(terms[max(n - order, 0):])
+        tail = mp.fsum(terms[max(n - order, 0) :])
         assert abs(tail) <= np.finfo(dtype).eps / 8 * abs(value), (name, order, n)
 
 
@@ -222,7 +243,12 @@ if __name__ == "__main__":
     print("| kernel | float32 f, f', f'' | float64 f, f', f'' |")
     print("|---|---|---|")
     for name in KERNELS:
-        cells = [", ".join(f"{e:.1f}" for e in kernel_errors(name, dt)) for dt in (np.float32, np.float64)]
+        cells = [
+            ", ".join(f"{e:.1f}" for e in kernel_errors(name, dt))
+            for dt in (np.float32, np.float64)
+        ]
         print(f"| {name} | {cells[0]} | {cells[1]} |")
-    cells = [", ".join(f"{e:.1f}" for e in atan2_over_errors(dt)) for dt in (np.float32, np.float64)]
+    cells = [
+        ", ".join(f"{e:.1f}" for e in atan2_over_errors(dt)) for dt in (np.float32, np.float64)
+    ]
     print(f"| atan2_over (f, ∂n², ∂w) | {cells[0]} | {cells[1]} |")

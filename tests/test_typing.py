@@ -17,14 +17,28 @@ HERE = pathlib.Path(__file__).parent
 
 
 def test_mypy_accepts_the_package_and_infers_user_types(tmp_path: pathlib.Path) -> None:
+    """mypy accepts the package and ``_typing_usage.py``, whose ``assert_type`` lines state the
+    types a user's checker must infer."""
     out = subprocess.run(
-        [sys.executable, "-m", "mypy", "--cache-dir", str(tmp_path), "--no-error-summary",
-         "--python-version", "3.11", str(HERE.parent / "jaxlie_geo"),
-         str(HERE / "_typing_usage.py")],
-        capture_output=True, text=True, cwd=HERE.parent,
+        [
+            sys.executable,
+            "-m",
+            "mypy",
+            "--cache-dir",
+            str(tmp_path),
+            "--no-error-summary",
+            "--python-version",
+            "3.11",
+            str(HERE.parent / "jaxlie_geo"),
+            str(HERE / "_typing_usage.py"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=HERE.parent,
     )
     assert out.returncode == 0, out.stdout + out.stderr
 
 
 def test_usage_runs_with_the_types_it_asserts() -> None:
+    """``_typing_usage.py`` also runs: the types it asserts are those of the values."""
     runpy.run_path(str(HERE / "_typing_usage.py"))

@@ -10,12 +10,19 @@ N = 100 000 draws is ≈ √(2/N) ≈ 0.5% per entry; the bound is 4% of the lar
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
-from conftest import is_se, over_groups, random_element, random_points, to_np
-
 import jax
 import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import (
+    is_se,
+    over_groups,
+    over_non_abelian_groups,
+    random_element,
+    random_points,
+    to_np,
+)
+
 from jaxlie_geo import SE2, SE3, SO3, uncertainty
 
 N_MC = 100_000
@@ -51,6 +58,9 @@ def _assert_cov_close(got, want, rel: float = 0.04):
 
 @over_groups
 def test_propagate_compose_independent_and_correlated(G):
+    """``propagate_compose`` equals the Monte-Carlo covariance of log((ab)⁻¹ (a⊕δa)(b⊕δb)), for
+    independent operands and for correlated ones (an asymmetric cross covariance); ignoring
+    the correlation is measurably wrong."""
     k = G.tangent_dim
     a, b = random_element(G, 1, (), DTYPE), random_element(G, 2, (), DTYPE)
     cov_a, cov_b = _random_cov(k, 1), _random_cov(k, 2)
@@ -74,9 +84,7 @@ def test_propagate_compose_independent_and_correlated(G):
     assert k == 1 or np.abs(cab - cab.T).max() > 0.5 * np.abs(cab).max()  # SO2: 1×1
     d = _draws(kj, joint)
     mc = _empirical_cov(jax.jit(residual)(d[:, :k], d[:, k:]))
-    got = uncertainty.propagate_compose(
-        a, joint[:k, :k], b, joint[k:, k:], cov_ab=joint[:k, k:]
-    )
+    got = uncertainty.propagate_compose(a, joint[:k, :k], b, joint[k:, k:], cov_ab=joint[:k, k:])
     _assert_cov_close(got, mc)
     # and ignoring the correlation is measurably wrong (the test can fail)
     wrong = uncertainty.propagate_compose(a, joint[:k, :k], b, joint[k:, k:])
@@ -85,6 +93,7 @@ def test_propagate_compose_independent_and_correlated(G):
 
 @over_groups
 def test_propagate_inverse(G):
+    """``propagate_inverse`` equals the Monte-Carlo covariance of log(a (a⊕δ)⁻¹)."""
     a = random_element(G, 4, (), DTYPE)
     cov = _random_cov(G.tangent_dim, 4)
     d = _draws(jax.random.key(1), cov)
@@ -94,6 +103,8 @@ def test_propagate_inverse(G):
 
 @over_groups
 def test_propagate_apply_with_and_without_point_noise(G):
+    """``propagate_apply`` equals the Monte-Carlo covariance of (T⊕δ)(p + ε), without and with
+    point noise ε."""
     T = random_element(G, 5, (), DTYPE)
     p = random_points(G, 5, (), DTYPE) * 3.0
     cov_T = _random_cov(G.tangent_dim, 5)
@@ -101,9 +112,7 @@ def test_propagate_apply_with_and_without_point_noise(G):
     kT, kp = jax.random.split(jax.random.key(2))
     dT, dp = _draws(kT, cov_T), _draws(kp, cov_p)
     moved = jax.jit(lambda dT, dp: (T @ G.exp(dT)) @ (p + dp))
-    _assert_cov_close(
-        uncertainty.propagate_apply(T, cov_T, p), _empirical_cov(moved(dT, 0.0 * dp))
-    )
+    _assert_cov_close(uncertainty.propagate_apply(T, cov_T, p), _empirical_cov(moved(dT, 0.0 * dp)))
     _assert_cov_close(
         uncertainty.propagate_apply(T, cov_T, p, cov_points=cov_p),
         _empirical_cov(moved(dT, dp)),
@@ -112,6 +121,8 @@ def test_propagate_apply_with_and_without_point_noise(G):
 
 @over_groups
 def test_sample_draws_the_given_covariance(G):
+    """The tangents log(μ⁻¹ x) of ``sample``'s draws have mean 0 and the given covariance (Monte
+    Carlo), with the mean's dtype and the requested batch."""
     mean = random_element(G, 7, (), DTYPE)
     cov = _random_cov(G.tangent_dim, 7, scale=0.05)
     draws = uncertainty.sample(jax.random.key(3), mean, cov, batch_axes=(N_MC,))
@@ -124,6 +135,8 @@ def test_sample_draws_the_given_covariance(G):
 
 
 def test_sample_batched_means_and_float32():
+    """``sample`` with a batch of float32 means, and with a batched covariance that broadcasts
+    against them, gives draws of batch (draws, *broadcast batch) in float32."""
     means = random_element(SE3, 8, (4,), jnp.float32)
     draws = uncertainty.sample(jax.random.key(4), means, np.eye(6, dtype=np.float32) * 1e-4, (5,))
     assert draws.get_batch_axes() == (5, 4)
@@ -150,6 +163,9 @@ def test_mean_of_symmetric_samples_is_the_centre(G):
 
 
 def test_mean_weights_batches_and_errors():
+    """``mean`` on the one-parameter subgroup through two poses, where the weighted fixed point
+    is known in closed form (a ⊕ β log(a⁻¹ b), β = w_b / (w_a + w_b), negative weights
+    included); default weights, the iteration cap, and an unbatched input's error."""
     a = random_element(SE3, 10, (3,), DTYPE)
     b = a @ SE3.exp(np.array([0.4, -0.2, 0.1, 0.3, 0.0, -0.2]))
     xs = SE3(jnp.stack([a.parameters(), b.parameters()]))  # batch (2, 3): 3 means of 2
@@ -169,15 +185,20 @@ def test_mean_weights_batches_and_errors():
         np.testing.assert_allclose(to_np(got.as_matrix()), to_np(want.as_matrix()), atol=1e-12)
     # default weights are 1/n: two points give the midpoint (1/(n−1) over-relaxes and
     # oscillates about it)
-    np.testing.assert_allclose(to_np(uncertainty.mean(xs).as_matrix()),
-                               to_np(a.interpolate(b, 0.5).as_matrix()), atol=1e-12)
+    np.testing.assert_allclose(
+        to_np(uncertainty.mean(xs).as_matrix()),
+        to_np(a.interpolate(b, 0.5).as_matrix()),
+        atol=1e-12,
+    )
     # the iteration cap: 0 iterations return the start (the first pose), 1 iteration is one
     # step μ₁ = x₀ ⊕ mean_i log(x₀⁻¹ xᵢ), written out here
-    np.testing.assert_array_equal(to_np(uncertainty.mean(xs, max_iters=0).parameters()),
-                                  to_np(a.parameters()))
+    np.testing.assert_array_equal(
+        to_np(uncertainty.mean(xs, max_iters=0).parameters()), to_np(a.parameters())
+    )
     step = a @ SE3.exp(0.5 * (a.inverse() @ a).log() + 0.5 * (a.inverse() @ b).log())
-    np.testing.assert_allclose(to_np(uncertainty.mean(xs, max_iters=1).as_matrix()),
-                               to_np(step.as_matrix()), atol=1e-12)
+    np.testing.assert_allclose(
+        to_np(uncertainty.mean(xs, max_iters=1).as_matrix()), to_np(step.as_matrix()), atol=1e-12
+    )
     with pytest.raises(ValueError, match="at least one batch axis"):
         uncertainty.mean(SO3.identity())
     with pytest.raises(ValueError, match=r"weights.*\(2,\)"):
@@ -190,6 +211,8 @@ def test_mean_weights_batches_and_errors():
 
 
 def test_mean_ignores_a_nan_element_in_the_stopping_test():
+    """Two means in one batch: a NaN among the poses of the second leaves the first equal to
+    its mean alone, at its fixed point; the second is NaN."""
     # batch (5, 2): two means of five; a NaN among the poses of the second must not stop
     # the iteration of the first (a NaN update compares false against tol).
     x = np.random.default_rng(4).normal(size=(5, 2, 6)) * 0.3
@@ -207,9 +230,13 @@ def test_mean_ignores_a_nan_element_in_the_stopping_test():
 
 @over_groups
 def test_propagation_batched_and_dtype(G):
+    """Batched propagation keeps the batch and the dtype (float32 and float64) and returns
+    symmetric positive semi-definite covariances; covariances of the wrong size raise
+    ValueError naming the argument."""
     for dtype in (jnp.float32, jnp.float64):
         a = random_element(G, 11, (2, 3), dtype)
-        cov = np.broadcast_to(np.eye(G.tangent_dim, dtype=dtype) * 1e-3, (3, G.tangent_dim, G.tangent_dim))
+        k = G.tangent_dim
+        cov = np.broadcast_to(np.eye(k, dtype=dtype) * 1e-3, (3, k, k))
         out = uncertainty.propagate_compose(a, cov, a, cov)
         assert out.shape == (2, 3, G.tangent_dim, G.tangent_dim) and out.dtype == dtype
         inv = uncertainty.propagate_inverse(a, cov)
@@ -223,8 +250,10 @@ def test_propagation_batched_and_dtype(G):
     if is_se(G):
         with pytest.raises(ValueError, match="cov_points"):
             uncertainty.propagate_apply(
-                random_element(G, 1, (), DTYPE), np.eye(G.tangent_dim),
-                np.zeros(G.space_dim), cov_points=np.eye(G.space_dim + 1),
+                random_element(G, 1, (), DTYPE),
+                np.eye(G.tangent_dim),
+                np.zeros(G.space_dim),
+                cov_points=np.eye(G.space_dim + 1),
             )
 
 
@@ -260,9 +289,11 @@ def test_mean_derivatives_closed_form_so2():
     np.testing.assert_allclose(to_np(g32), w / S, rtol=1e-6)
 
 
-@pytest.mark.parametrize("G", [SE2, SO3, SE3], ids=lambda G: G.__name__)
+@over_non_abelian_groups
 def test_mean_derivatives_against_finite_differences(G):
-    """Three means of six poses (batch (6, 3)) and weights: the gradient against central
+    """The non-abelian groups (SO2's mean is a weighted average of angles, checked in closed
+    form by test_mean_derivatives_closed_form_so2). Three means of six poses (batch (6, 3))
+    and weights: the gradient against central
     differences of the converged iteration (step 1e-5 in float64: truncation ≈ 1e-10,
     rounding ≈ 1e-11), forward against reverse mode, and (one group each, the rule being
     the same code for all: it costs seconds of compile) a Hessian-vector product against
@@ -283,10 +314,13 @@ def test_mean_derivatives_against_finite_differences(G):
     fd = (g_jit(x + h * dx, w + h * dw) - g_jit(x - h * dx, w - h * dw)) / (2 * h)
     np.testing.assert_allclose(float(jnp.sum(gx * dx) + jnp.sum(gw * dw)), float(fd), rtol=1e-8)
     if G is SE3:
+
         def m(w):
             return uncertainty.mean(G.exp(x), w).log()
 
-        np.testing.assert_allclose(to_np(jax.jacfwd(m)(w)), to_np(jax.jacrev(m)(w)), rtol=1e-11, atol=1e-13)
+        np.testing.assert_allclose(
+            to_np(jax.jacfwd(m)(w)), to_np(jax.jacrev(m)(w)), rtol=1e-11, atol=1e-13
+        )
     if G is SE2:
         # Hessian along dx against differences of the gradient
         def gx_of(x):
@@ -303,6 +337,8 @@ def test_mean_derivatives_against_finite_differences(G):
 
 
 def test_mean_gradient_of_a_clean_mean_beside_a_nan_one():
+    """The gradient of a clean mean is unchanged by a NaN among the poses of another mean in
+    the same batch; the other's gradient is NaN (0 × NaN, as everywhere in JAX)."""
     # two means; NaN among the poses of the second leaves the first's gradient as alone
     # (the second's is NaN, even where its cotangent is zero: 0 × NaN, as everywhere in JAX)
     x = np.random.default_rng(23).normal(size=(5, 2, 6)) * 0.3
