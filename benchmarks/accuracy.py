@@ -124,13 +124,15 @@ def main() -> int:
     elapsed = time.perf_counter() - t0
 
     names = list(libs)
-    print(f"Worst error in ulp, {' / '.join(names)} "
-          f"(jaxlie_geo {_version('jaxlie_geo')}, jaxlie {_version('jaxlie')}, "
-          f"jax {jax.__version__}, {platform.machine()}, backend {jax.default_backend()} "
-          f"({jax.devices()[0].device_kind}), {args.samples} samples per "
-          f"regime and |v|, {elapsed:.0f} s). Bounds: exp, log {M.BOUNDS['exp']:g}; "
-          f"d/dx {M.BOUNDS['jac']:g}; d²/dx² {M.BOUNDS['hess']:g}; "
-          f"**bold** = over the bound.\n")
+    print(
+        f"Worst error in ulp, {' / '.join(names)} "
+        f"(jaxlie_geo {_version('jaxlie_geo')}, jaxlie {_version('jaxlie')}, "
+        f"jax {jax.__version__}, {platform.machine()}, backend {jax.default_backend()} "
+        f"({jax.devices()[0].device_kind}), {args.samples} samples per "
+        f"regime and |v|, {elapsed:.0f} s). Bounds: exp, log {M.BOUNDS['exp']:g}; "
+        f"d/dx {M.BOUNDS['jac']:g}; d²/dx² {M.BOUNDS['hess']:g}; "
+        f"**bold** = over the bound.\n"
+    )
 
     def get(name, g, op, dt, r):
         v = worst.get((name, g, op, dt, r))
@@ -175,8 +177,16 @@ def main() -> int:
         with open(args.json, "w") as f:
             json.dump(
                 [
-                    {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e,
-                     "where": where, "input": desc}
+                    {
+                        "lib": n,
+                        "group": g,
+                        "op": op,
+                        "dtype": dt,
+                        "regime": r,
+                        "ulp": e,
+                        "where": where,
+                        "input": desc,
+                    }
                     for (n, g, op, dt, r), (e, desc, where) in worst.items()
                 ],
                 f,
@@ -184,11 +194,22 @@ def main() -> int:
             )
     if args.save:
         info = _run.machine_info("benchmarks/accuracy.py")
-        cells = [{"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e}
-                 for (n, g, op, dt, r), (e, _, _) in worst.items() if op in M.OPS_IN_REGIME[r]]
-        data = {"machine": info, "samples": args.samples, "libs": names, "bounds": M.BOUNDS,
-                "ops": OP_TEXT, "regimes": [{"key": r, "label": REGIME_HEAD[r]} for r in M.REGIMES],
-                "notes": NOTES, "cells": cells, "elapsed_s": elapsed}
+        cells = [
+            {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e}
+            for (n, g, op, dt, r), (e, _, _) in worst.items()
+            if op in M.OPS_IN_REGIME[r]
+        ]
+        data = {
+            "machine": info,
+            "samples": args.samples,
+            "libs": names,
+            "bounds": M.BOUNDS,
+            "ops": OP_TEXT,
+            "regimes": [{"key": r, "label": REGIME_HEAD[r]} for r in M.REGIMES],
+            "notes": NOTES,
+            "cells": cells,
+            "elapsed_s": elapsed,
+        }
         save("accuracy", data, args)
     return 0
 

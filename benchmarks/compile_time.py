@@ -28,8 +28,10 @@ import sys
 import time
 
 _REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if (os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
-        and _REPO_ROOT not in sys.path):
+if (
+    os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
+    and _REPO_ROOT not in sys.path
+):
     sys.path.insert(0, _REPO_ROOT)
 
 
@@ -83,10 +85,20 @@ def main(argv=None) -> None:
         sys.exit("compile_time.py compares against jaxlie: pip install 'jaxlie==1.5.*'")
 
     libs = [("jaxlie_geo", jaxlie_geo), ("jaxlie", jaxlie)]
-    print(f"jax {jax.__version__}, {jax.devices()[0].platform}, N = {args.n}, float32, "
-          f"min of {args.repeats}, ms")
-    head = ["group", "program", "K", "ours: trace", "ours: lower+compile", "jaxlie: trace",
-            "jaxlie: lower+compile", "total jaxlie / ours"]
+    print(
+        f"jax {jax.__version__}, {jax.devices()[0].platform}, N = {args.n}, float32, "
+        f"min of {args.repeats}, ms"
+    )
+    head = [
+        "group",
+        "program",
+        "K",
+        "ours: trace",
+        "ours: lower+compile",
+        "jaxlie: trace",
+        "jaxlie: lower+compile",
+        "total jaxlie / ours",
+    ]
     if args.markdown:
         print("| " + " | ".join(head) + " |\n|" + "---|" * 3 + "--:|" * 5)
     else:
@@ -103,11 +115,16 @@ def main(argv=None) -> None:
                         t = measure(program(lib, group, K, grad), x)
                         best[name] = [min(a, b) for a, b in zip(best[name], t)]
                 ours, theirs = best["jaxlie_geo"], best["jaxlie"]
-                row = [group, "gradient" if grad else "value", str(K),
-                       *(f"{1e3 * t:.0f}" for t in (*ours, *theirs)),
-                       f"{sum(theirs) / sum(ours):.2f}"]
-                print(("| " + " | ".join(row) + " |") if args.markdown else "  ".join(row),
-                      flush=True)
+                row = [
+                    group,
+                    "gradient" if grad else "value",
+                    str(K),
+                    *(f"{1e3 * t:.0f}" for t in (*ours, *theirs)),
+                    f"{sum(theirs) / sum(ours):.2f}",
+                ]
+                print(
+                    ("| " + " | ".join(row) + " |") if args.markdown else "  ".join(row), flush=True
+                )
 
 
 if __name__ == "__main__":

@@ -81,15 +81,27 @@ CASES = {
     "jac_right_inv": ("G.jac_right_inv(x)", "δ ↦ log(exp(x) exp(δ))", ("tangent",)),
     "jac_left_inv": ("G.jac_left_inv(x)", "δ ↦ log(exp(δ) exp(x))", ("tangent",)),
     "jlog": ("T.jlog()", "δ ↦ log(T exp(δ))", ("element",)),
-    "compose": ("jacobians.compose(a, b)", "(δa, δb) ↦ log((ab)⁻¹ (a exp δa)(b exp δb))",
-                ("element", "element")),
+    "compose": (
+        "jacobians.compose(a, b)",
+        "(δa, δb) ↦ log((ab)⁻¹ (a exp δa)(b exp δb))",
+        ("element", "element"),
+    ),
     "inverse": ("jacobians.inverse(a)", "δ ↦ log(a (a exp δ)⁻¹)", ("element",)),
-    "between": ("jacobians.between(a, b)", "(δa, δb) ↦ log((a⁻¹b)⁻¹ (a exp δa)⁻¹ (b exp δb))",
-                ("element", "element")),
-    "rminus": ("jacobians.rminus(a, b)", "(δa, δb) ↦ log((a exp δa)⁻¹ (b exp δb))",
-               ("element", "element")),
-    "rplus": ("jacobians.rplus(a, x)", "(δa, δx) ↦ log((a exp x)⁻¹ (a exp δa) exp(x+δx))",
-              ("element", "tangent")),
+    "between": (
+        "jacobians.between(a, b)",
+        "(δa, δb) ↦ log((a⁻¹b)⁻¹ (a exp δa)⁻¹ (b exp δb))",
+        ("element", "element"),
+    ),
+    "rminus": (
+        "jacobians.rminus(a, b)",
+        "(δa, δb) ↦ log((a exp δa)⁻¹ (b exp δb))",
+        ("element", "element"),
+    ),
+    "rplus": (
+        "jacobians.rplus(a, x)",
+        "(δa, δx) ↦ log((a exp x)⁻¹ (a exp δa) exp(x+δx))",
+        ("element", "tangent"),
+    ),
     "apply": ("jacobians.apply(T, p)", "(δT, δp) ↦ (T exp δT)(p + δp)", ("element", "point")),
 }
 
@@ -97,24 +109,39 @@ CASES = {
 def parse_args(argv=None):
     p = argparse.ArgumentParser(
         description="Benchmark jaxlie_geo's closed-form Jacobians against jax.jacfwd "
-                    "(jit, interleaved).",
+        "(jit, interleaved).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--sizes", default=None,
-                   help="comma-separated batch sizes (default 100000; --quick: 1000)")
-    p.add_argument("--groups", default=",".join(GROUPS),
-                   help="comma-separated subset of SO2,SE2,SO3,SE3")
-    p.add_argument("--cases", default=",".join(CASES),
-                   help="comma-separated subset of " + ",".join(CASES))
-    p.add_argument("--repeats", type=int, default=None,
-                   help="interleaved repetitions per case; default: automatic, 7..25 within a time "
-                        "budget per case (--quick: 3)")
-    p.add_argument("--dtype", choices=("float32", "float64"), default="float32",
-                   help="dtype of the timed runs (the agreement check is always float64)")
+    p.add_argument(
+        "--sizes", default=None, help="comma-separated batch sizes (default 100000; --quick: 1000)"
+    )
+    p.add_argument(
+        "--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3"
+    )
+    p.add_argument(
+        "--cases", default=",".join(CASES), help="comma-separated subset of " + ",".join(CASES)
+    )
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=None,
+        help="interleaved repetitions per case; default: automatic, 7..25 within a time "
+        "budget per case (--quick: 3)",
+    )
+    p.add_argument(
+        "--dtype",
+        choices=("float32", "float64"),
+        default="float32",
+        help="dtype of the timed runs (the agreement check is always float64)",
+    )
     p.add_argument("--quick", action="store_true", help="small size and few repeats (smoke test)")
     p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
-    p.add_argument("--json", default=None, metavar="PATH",
-                   help="also write the raw results (the --save format) to PATH")
+    p.add_argument(
+        "--json",
+        default=None,
+        metavar="PATH",
+        help="also write the raw results (the --save format) to PATH",
+    )
     p.add_argument("--seed", type=int, default=0)
     add_save_arguments(p)
     args = p.parse_args(argv)
@@ -177,35 +204,48 @@ def make_autodiff(lib, group: str, case: str):
     if case == "jlog":
         return at0(lambda d, pt: (G(pt) @ E(d)).log())
     if case == "compose":
+
         def f(da, db, pa, pb):
             a, b = G(pa), G(pb)
             return ((a @ b).inverse() @ ((a @ E(da)) @ (b @ E(db)))).log()
+
         return at0(f, argnums=(0, 1))
     if case == "inverse":
+
         def f(d, pa):
             a = G(pa)
             return (a @ (a @ E(d)).inverse()).log()
+
         return at0(f)
     if case == "between":
+
         def f(da, db, pa, pb):
             a, b = G(pa), G(pb)
             return ((a.inverse() @ b).inverse() @ ((a @ E(da)).inverse() @ (b @ E(db)))).log()
+
         return at0(f, argnums=(0, 1))
     if case == "rminus":
+
         def f(da, db, pa, pb):
             a, b = G(pa), G(pb)
             return ((a @ E(da)).inverse() @ (b @ E(db))).log()
+
         return at0(f, argnums=(0, 1))
     if case == "rplus":
+
         def f(da, dx, pa, x):
             a = G(pa)
             return ((a @ E(x)).inverse() @ ((a @ E(da)) @ E(x + dx))).log()
+
         return at0(f, argnums=(0, 1))
     if case == "apply":
+
         def jac(pt, p):
             T = G(pt)
             return jax.jacfwd(lambda dT, dp: (T @ E(dT)) @ (p + dp), argnums=(0, 1))(
-                jnp.zeros((k,), pt.dtype), jnp.zeros_like(p))
+                jnp.zeros((k,), pt.dtype), jnp.zeros_like(p)
+            )
+
         return jax.vmap(jac)
     raise ValueError(case)
 
@@ -326,8 +366,9 @@ def bench_case(lib, group, case, n, args, index):
     target_s = 0.002 if args.quick else 0.01
     budget_s = 0.1 if args.quick else 1.0
     repeats = 3 if (args.quick and args.repeats is None) else args.repeats
-    t_ours, t_ad = _run.interleaved(c_ours, c_ad, inputs, repeats, target_s, budget_s,
-                                    min_repeats=3 if args.quick else 5)
+    t_ours, t_ad = _run.interleaved(
+        c_ours, c_ad, inputs, repeats, target_s, budget_s, min_repeats=3 if args.quick else 5
+    )
     del c_ours, c_ad, inputs
 
     if args.dtype == "float64":
@@ -340,12 +381,17 @@ def bench_case(lib, group, case, n, args, index):
     st = _run.paired_stats(t_ours, t_ad)
     label, mapping, _ = CASES[case]
     return {
-        "group": group, "case": case, "jacobian": label, "map": mapping, "n": n,
+        "group": group,
+        "case": case,
+        "jacobian": label,
+        "map": mapping,
+        "n": n,
         "dtype": args.dtype,
         "ours_ns_per_elem": st["median_a"] * 1e9 / n,
         "jacfwd_ns_per_elem": st["median_b"] * 1e9 / n,
         "ratio": st["ratio"],
-        "ratio_q1": st["ratio_q1"], "ratio_q3": st["ratio_q3"],
+        "ratio_q1": st["ratio_q1"],
+        "ratio_q3": st["ratio_q3"],
         "compile_ours_ms": comp_ours * 1e3,
         "compile_jacfwd_ms": comp_ad * 1e3,
         "repeats": len(t_ours),
@@ -369,9 +415,19 @@ def global_warmup(lib, dtype):
 # Reporting
 # --------------------------------------------------------------------------------------
 
-HEADER = ["group", "Jacobian", "map differentiated by jacfwd (at δ = 0)", "N", "ours ns/elem",
-          "jacfwd ns/elem", "ratio (jacfwd/ours)", "ratio IQR", "max |diff|", "compile ms ours",
-          "compile ms jacfwd"]
+HEADER = [
+    "group",
+    "Jacobian",
+    "map differentiated by jacfwd (at δ = 0)",
+    "N",
+    "ours ns/elem",
+    "jacfwd ns/elem",
+    "ratio (jacfwd/ours)",
+    "ratio IQR",
+    "max |diff|",
+    "compile ms ours",
+    "compile ms jacfwd",
+]
 N_LEFT = 3  # left-aligned text columns
 
 
@@ -388,13 +444,21 @@ def table_rows(results, markdown):
     rows = []
     for r in results:
         code = (lambda s: f"`{s}`") if markdown else (lambda s: s)
-        rows.append([
-            r["group"], code(r["jacobian"]), code(r["map"]), fmt_n(r["n"]),
-            fmt_ns(r["ours_ns_per_elem"]), fmt_ns(r["jacfwd_ns_per_elem"]),
-            f"{r['ratio']:.2f}", f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
-            f"{r['max_abs_diff_float64']:.1e}",
-            f"{r['compile_ours_ms']:.0f}", f"{r['compile_jacfwd_ms']:.0f}",
-        ])
+        rows.append(
+            [
+                r["group"],
+                code(r["jacobian"]),
+                code(r["map"]),
+                fmt_n(r["n"]),
+                fmt_ns(r["ours_ns_per_elem"]),
+                fmt_ns(r["jacfwd_ns_per_elem"]),
+                f"{r['ratio']:.2f}",
+                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
+                f"{r['max_abs_diff_float64']:.1e}",
+                f"{r['compile_ours_ms']:.0f}",
+                f"{r['compile_jacfwd_ms']:.0f}",
+            ]
+        )
     return rows
 
 
@@ -402,13 +466,18 @@ def render(header, rows, markdown: bool, n_left: int = N_LEFT) -> str:
     if markdown:
         esc = lambda c: c.replace("|", "\\|")  # noqa: E731  ("max |diff|")
         header, rows = [esc(h) for h in header], [[esc(c) for c in r] for r in rows]
-        out = ["| " + " | ".join(header) + " |",
-               "|" + "|".join("---" if i < n_left else "--:" for i in range(len(header))) + "|"]
+        out = [
+            "| " + " | ".join(header) + " |",
+            "|" + "|".join("---" if i < n_left else "--:" for i in range(len(header))) + "|",
+        ]
         return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
-              for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(c.ljust(w) if i < n_left else c.rjust(w)  # noqa: E731
-                                   for i, (c, w) in enumerate(zip(cells, widths)))
+    widths = [
+        max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)
+    ]
+    line = lambda cells: "  ".join(
+        c.ljust(w) if i < n_left else c.rjust(w)  # noqa: E731
+        for i, (c, w) in enumerate(zip(cells, widths))
+    )
     return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
 
 
@@ -417,47 +486,61 @@ def summary(results, skipped, markdown) -> str:
     lines = []
     groups = [g for g in GROUPS if any(r["group"] == g for r in results)]
     if results:
-        parts = [f"{g} {geomean([r['ratio'] for r in results if r['group'] == g]):.2f}"
-                 for g in groups]
-        lines.append("Geometric-mean ratio jacfwd/ours (>1: closed form faster): "
-                     + ", ".join(parts)
-                     + f"; overall {geomean([r['ratio'] for r in results]):.2f}.")
+        parts = [
+            f"{g} {geomean([r['ratio'] for r in results if r['group'] == g]):.2f}" for g in groups
+        ]
+        lines.append(
+            "Geometric-mean ratio jacfwd/ours (>1: closed form faster): "
+            + ", ".join(parts)
+            + f"; overall {geomean([r['ratio'] for r in results]):.2f}."
+        )
     slow = [r for r in results if r["ratio"] < 0.5]
     lines.append("")
     if slow:
         lines.append("Closed forms slower than 2x jacfwd (ratio < 0.5):")
         for r in sorted(slow, key=lambda r: r["ratio"]):
-            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
-                         f"ratio {r['ratio']:.2f} ({fmt_ns(r['ours_ns_per_elem'])} vs "
-                         f"{fmt_ns(r['jacfwd_ns_per_elem'])} ns/elem)")
+            lines.append(
+                f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
+                f"ratio {r['ratio']:.2f} ({fmt_ns(r['ours_ns_per_elem'])} vs "
+                f"{fmt_ns(r['jacfwd_ns_per_elem'])} ns/elem)"
+            )
     else:
         lines.append("No closed form is slower than 2x jacfwd (ratio < 0.5).")
     slower = [r for r in results if 0.5 <= r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
     if slower:
-        lines.append("Closed forms slower than jacfwd "
-                     "(ratio < 0.95, whole paired-ratio IQR below 1):")
+        lines.append(
+            "Closed forms slower than jacfwd (ratio < 0.95, whole paired-ratio IQR below 1):"
+        )
         for r in sorted(slower, key=lambda r: r["ratio"]):
-            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
-                         f"ratio {r['ratio']:.2f}")
+            lines.append(
+                f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: ratio {r['ratio']:.2f}"
+            )
     bad = [r for r in results if not (r["max_abs_diff_float64"] <= TOL)]
     lines.append("")
     if bad:
         lines.append(f"DISAGREEMENT: closed form and jacfwd differ by more than {TOL:g} (float64):")
         for r in bad:
-            lines.append(f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
-                         f"max |diff| = {r['max_abs_diff_float64']:.3g}")
+            lines.append(
+                f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
+                f"max |diff| = {r['max_abs_diff_float64']:.3g}"
+            )
     else:
-        lines.append(f"All closed forms agree with jacfwd to {TOL:g} "
-                     "(float64 check, max abs difference).")
+        lines.append(
+            f"All closed forms agree with jacfwd to {TOL:g} (float64 check, max abs difference)."
+        )
     wrong_dtype = [r for r in results if r["output_dtypes"] != [r["dtype"]]]
     if wrong_dtype:
-        lines.append("Output dtype differs from the input dtype: "
-                     + ", ".join(f"{r['group']} {r['case']} {r['output_dtypes']}"
-                                 for r in wrong_dtype))
+        lines.append(
+            "Output dtype differs from the input dtype: "
+            + ", ".join(f"{r['group']} {r['case']} {r['output_dtypes']}" for r in wrong_dtype)
+        )
     if skipped:
         lines.append("")
-        lines.append("Skipped (constant Jacobian, independent of the inputs): "
-                     + ", ".join(f"{g} {CASES[c][0]}" for g, c in skipped) + ".")
+        lines.append(
+            "Skipped (constant Jacobian, independent of the inputs): "
+            + ", ".join(f"{g} {CASES[c][0]}" for g, c in skipped)
+            + "."
+        )
     return "\n".join(lines)
 
 
@@ -491,20 +574,25 @@ def main(argv=None):
                 r = bench_case(lib, group, case, n, args, index)
                 index += 1
                 results.append(r)
-                print(f"{group:4s} {case:14s} N={fmt_n(n):>6s}  "
-                      f"ours {fmt_ns(r['ours_ns_per_elem']):>7s} ns/el  "
-                      f"jacfwd {fmt_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  "
-                      f"ratio {r['ratio']:5.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
-                      f"compile {r['compile_ours_ms']:5.0f}/{r['compile_jacfwd_ms']:5.0f} ms  "
-                      f"x{r['repeats']}  diff64 {r['max_abs_diff_float64']:.1e}  "
-                      f"diff{args.dtype[-2:]} {r['max_abs_diff_timed_dtype']:.1e}", flush=True)
+                print(
+                    f"{group:4s} {case:14s} N={fmt_n(n):>6s}  "
+                    f"ours {fmt_ns(r['ours_ns_per_elem']):>7s} ns/el  "
+                    f"jacfwd {fmt_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  "
+                    f"ratio {r['ratio']:5.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
+                    f"compile {r['compile_ours_ms']:5.0f}/{r['compile_jacfwd_ms']:5.0f} ms  "
+                    f"x{r['repeats']}  diff64 {r['max_abs_diff_float64']:.1e}  "
+                    f"diff{args.dtype[-2:]} {r['max_abs_diff_timed_dtype']:.1e}",
+                    flush=True,
+                )
 
     elapsed = time.perf_counter() - t_start
     print()
-    print(f"## Results ({args.dtype}; per element = median time per call / N; ratio = median over "
-          f"interleaved repetitions of jacfwd time / closed-form time, >1 means the closed form is "
-          f"faster; IQR of those ratios; max |diff| = max abs difference closed form vs jacfwd in "
-          f"float64 on the same inputs)")
+    print(
+        f"## Results ({args.dtype}; per element = median time per call / N; ratio = median over "
+        f"interleaved repetitions of jacfwd time / closed-form time, >1 means the closed form is "
+        f"faster; IQR of those ratios; max |diff| = max abs difference closed form vs jacfwd in "
+        f"float64 on the same inputs)"
+    )
     print()
     print(render(HEADER, table_rows(results, args.markdown), args.markdown))
     print()
@@ -512,9 +600,12 @@ def main(argv=None):
     print()
     print(f"total benchmark time: {elapsed:.0f} s")
 
-    data = {"machine": info, "results": results,
-            "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
-            "elapsed_s": elapsed}
+    data = {
+        "machine": info,
+        "results": results,
+        "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
+        "elapsed_s": elapsed,
+    }
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(data, f, indent=1, ensure_ascii=False)

@@ -108,7 +108,7 @@ def jacnumerical(f, eps=1e-5):
     return jac
 '''
 
-CONFTEST = '''import os
+CONFTEST = """import os
 import sys
 
 if os.environ["JAXLIE_SUITE_TARGET"] == "jaxlie_geo":
@@ -118,7 +118,7 @@ if os.environ["JAXLIE_SUITE_TARGET"] == "jaxlie_geo":
     sys.modules["jaxlie"] = jaxlie_geo
     for name, module in (("hints", hints), ("manifold", manifold), ("utils", utils)):
         sys.modules["jaxlie." + name] = module
-'''
+"""
 
 
 def main() -> int:
@@ -131,8 +131,22 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         sdist = args.sdist
         if sdist is None:
-            subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps",
-                            "--no-binary", ":all:", "-d", tmp, "jaxlie==1.5.*"], check=True)
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "pip",
+                    "download",
+                    "-q",
+                    "--no-deps",
+                    "--no-binary",
+                    ":all:",
+                    "-d",
+                    tmp,
+                    "jaxlie==1.5.*",
+                ],
+                check=True,
+            )
             sdist = glob.glob(os.path.join(tmp, "jaxlie-*.tar.gz"))[0]
         with tarfile.open(sdist) as tar:
             members = [m for m in tar.getmembers() if "/tests/" in m.name and m.isfile()]
@@ -147,11 +161,24 @@ def main() -> int:
             f.write(CONFTEST)
         with open(os.path.join(tmp, "pytest.ini"), "w") as f:
             f.write("[pytest]\n")  # keep our pyproject's pytest settings out
-        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-c",
-               os.path.join(tmp, "pytest.ini"), "--rootdir", tests, tests,
-               "--ignore", os.path.join(tests, "test_jac_left.py"),
-               "--deselect", "test_jlog.py::test_jlog_runtime",
-               *args.pytest_args]
+        cmd = [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "-c",
+            os.path.join(tmp, "pytest.ini"),
+            "--rootdir",
+            tests,
+            tests,
+            "--ignore",
+            os.path.join(tests, "test_jac_left.py"),
+            "--deselect",
+            "test_jlog.py::test_jlog_runtime",
+            *args.pytest_args,
+        ]
         env = {**os.environ, "JAXLIE_SUITE_TARGET": args.target}
         return subprocess.run(cmd, env=env, cwd=tests).returncode
 

@@ -46,13 +46,26 @@ def plot(runs: list, out: Path) -> None:
                 if r["group"] != group or r["op"] not in OPS:
                     continue
                 j = sizes.index(r["n"])
-                x = (OPS.index(r["op"]) + (j - (len(sizes) - 1) / 2) * slot
-                     + (k - (len(runs) - 1) / 2) * slot / (len(runs) + 1))
+                x = (
+                    OPS.index(r["op"])
+                    + (j - (len(sizes) - 1) / 2) * slot
+                    + (k - (len(runs) - 1) / 2) * slot / (len(runs) + 1)
+                )
                 color = SIZE_COLORS[j % len(SIZE_COLORS)]
                 yerr = [[r["ratio"] - r["ratio_q1"]], [r["ratio_q3"] - r["ratio"]]]
-                ax.errorbar(x, r["ratio"], yerr=yerr, fmt=shape, ms=5.5, color=color,
-                            mfc="white" if hollow else color, mew=1.3, elinewidth=1,
-                            capsize=1.5, zorder=3)
+                ax.errorbar(
+                    x,
+                    r["ratio"],
+                    yerr=yerr,
+                    fmt=shape,
+                    ms=5.5,
+                    color=color,
+                    mfc="white" if hollow else color,
+                    mew=1.3,
+                    elinewidth=1,
+                    capsize=1.5,
+                    zorder=3,
+                )
         ax.set_title(group, fontsize=12, fontweight="bold", loc="left")
         ax.set_yscale("log")
         ax.set_xlim(-0.5, len(OPS) - 0.5)
@@ -68,26 +81,46 @@ def plot(runs: list, out: Path) -> None:
         ax.set_yticklabels([f"{t:g}×" for t in ticks])
     for ax in axes[:, 0]:
         ax.set_ylabel("jaxlie time / jaxlie_geo time")
-    handles = [Line2D([], [], ls="", marker="o", color=SIZE_COLORS[j % len(SIZE_COLORS)],
-                      label=f"N = {report.pretty_n(n)}") for j, n in enumerate(sizes)]
-    handles += [Line2D([], [], ls="", marker="o", color="0.3", label="float32"),
-                Line2D([], [], ls="", marker="o", color="0.3", mfc="white", mew=1.3,
-                       label="float64")]
+    handles = [
+        Line2D(
+            [],
+            [],
+            ls="",
+            marker="o",
+            color=SIZE_COLORS[j % len(SIZE_COLORS)],
+            label=f"N = {report.pretty_n(n)}",
+        )
+        for j, n in enumerate(sizes)
+    ]
+    handles += [
+        Line2D([], [], ls="", marker="o", color="0.3", label="float32"),
+        Line2D([], [], ls="", marker="o", color="0.3", mfc="white", mew=1.3, label="float64"),
+    ]
     if len(machines) > 1:
-        handles += [Line2D([], [], ls="", marker=SHAPES[i % len(SHAPES)], color="0.3", label=m)
-                    for i, m in enumerate(machines)]
+        handles += [
+            Line2D([], [], ls="", marker=SHAPES[i % len(SHAPES)], color="0.3", label=m)
+            for i, m in enumerate(machines)
+        ]
     handles.append(Line2D([], [], color="0.3", lw=1, label="1× = as fast as jaxlie"))
     rows = -(-len(handles) // 7)
-    fig.legend(handles=handles, loc="lower center", ncol=-(-len(handles) // rows), fontsize=9,
-               frameon=False)
+    fig.legend(
+        handles=handles,
+        loc="lower center",
+        ncol=-(-len(handles) // rows),
+        fontsize=9,
+        frameon=False,
+    )
 
     def field(key: str) -> str:
         values = (str(run["machine"].get(key, "?")).split()[0] for run in runs)  # date: day only
         return ", ".join(dict.fromkeys(values))
 
-    fig.suptitle("jaxlie_geo against jaxlie: speed-up per element (>1× = jaxlie_geo faster; "
-                 f"bars = IQR)\n{' | '.join(machines)} — {field('date')} — jax {field('jax')}, "
-                 f"jaxlie {field('jaxlie')}", fontsize=12)
+    fig.suptitle(
+        "jaxlie_geo against jaxlie: speed-up per element (>1× = jaxlie_geo faster; "
+        f"bars = IQR)\n{' | '.join(machines)} — {field('date')} — jax {field('jax')}, "
+        f"jaxlie {field('jaxlie')}",
+        fontsize=12,
+    )
     fig.tight_layout(rect=(0, 0.035 * rows + 0.015, 1, 1))
     fig.savefig(out, dpi=120, metadata={"Software": None})  # no version stamp: reproducible
     plt.close(fig)
@@ -96,13 +129,24 @@ def plot(runs: list, out: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("files", nargs="*", type=Path,
-                    help="raw speed-*.json files (default: those of the machine the results "
-                         "page leads with)")
-    ap.add_argument("--raw-dir", type=Path, default=report.RAW_DIR,
-                    help="raw results for the default (default: %(default)s)")
-    ap.add_argument("--out", type=Path, default=report.PAGE.parent / report.PLOT_NAME,
-                    help="output PNG (default: %(default)s)")
+    ap.add_argument(
+        "files",
+        nargs="*",
+        type=Path,
+        help="raw speed-*.json files (default: those of the machine the results page leads with)",
+    )
+    ap.add_argument(
+        "--raw-dir",
+        type=Path,
+        default=report.RAW_DIR,
+        help="raw results for the default (default: %(default)s)",
+    )
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=report.PAGE.parent / report.PLOT_NAME,
+        help="output PNG (default: %(default)s)",
+    )
     args = ap.parse_args()
     if args.files:
         runs = [json.loads(f.read_text(encoding="utf-8")) for f in args.files]

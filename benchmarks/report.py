@@ -95,8 +95,10 @@ def fmt_ulp(e) -> str:
 
 def table(header, rows, align) -> list:
     """Markdown table lines; ``align`` is one of "l"/"r" per column."""
-    out = ["| " + " | ".join(header) + " |",
-           "|" + "|".join("---" if a == "l" else "--:" for a in align) + "|"]
+    out = [
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join("---" if a == "l" else "--:" for a in align) + "|",
+    ]
     return out + ["| " + " | ".join(r) + " |" for r in rows]
 
 
@@ -123,19 +125,31 @@ def machine_name(info: dict) -> str:
 
 def add_save_arguments(p: argparse.ArgumentParser) -> None:
     """``--save`` and the options that say where it writes."""
-    p.add_argument("--save", action="store_true",
-                   help="write the results to raw/<machine>/ and regenerate RESULTS.md and its "
-                        "plot")
-    p.add_argument("--machine", default=None,
-                   help="machine name for --save (default: derived from the CPU or GPU model)")
-    p.add_argument("--note", default=None,
-                   help="free text about the machine shown on the results page (default: the "
-                        "note already saved for the machine)")
-    p.add_argument("--raw-dir", type=Path, default=RAW_DIR,
-                   help="raw results folder (default: %(default)s)")
-    p.add_argument("--page", type=Path, default=PAGE,
-                   help="results page to regenerate (default: %(default)s); the plot goes "
-                        "beside it")
+    p.add_argument(
+        "--save",
+        action="store_true",
+        help="write the results to raw/<machine>/ and regenerate RESULTS.md and its plot",
+    )
+    p.add_argument(
+        "--machine",
+        default=None,
+        help="machine name for --save (default: derived from the CPU or GPU model)",
+    )
+    p.add_argument(
+        "--note",
+        default=None,
+        help="free text about the machine shown on the results page (default: the "
+        "note already saved for the machine)",
+    )
+    p.add_argument(
+        "--raw-dir", type=Path, default=RAW_DIR, help="raw results folder (default: %(default)s)"
+    )
+    p.add_argument(
+        "--page",
+        type=Path,
+        default=PAGE,
+        help="results page to regenerate (default: %(default)s); the plot goes beside it",
+    )
 
 
 def save(kind: str, data: dict, args) -> Path:
@@ -176,9 +190,12 @@ def _date(info: dict) -> str:
 
 def machine_order(raw: dict) -> list:
     """CPUs before GPUs; among each, the machine with the newest speed run first."""
+
     def newest(m):
-        return max([d["machine"].get("date", "") for k, d in raw[m].items()
-                    if k.startswith("speed")] or [""])
+        return max(
+            [d["machine"].get("date", "") for k, d in raw[m].items() if k.startswith("speed")]
+            or [""]
+        )
 
     def gpu(m):
         return any(d["machine"].get("backend", "cpu") != "cpu" for d in raw[m].values())
@@ -392,17 +409,32 @@ def _speed_table(data: dict) -> list:
         body.append(row)
 
     single = "; the N = 1 column is the speed-up of a single call" if 1 in sizes else ""
-    lines = [f"### {label(info)}, {dtype}", "",
-             f"jax {info.get('jax', '?')}, measured {_date(info)}. Times per element{single}.", ""]
+    lines = [
+        f"### {label(info)}, {dtype}",
+        "",
+        f"jax {info.get('jax', '?')}, measured {_date(info)}. Times per element{single}.",
+        "",
+    ]
     lines += table(header, body, align) + [""]
     lines += [f"- {note}" for note in _speed_notes(data)] + [""]
     memory = data.get("memory")
     if memory:
-        lines += [f"Memory of the compiled SE3 operations at N = {pretty_n_pow2(memory[0]['n'])}, "
-                  f"{dtype}, MB:", ""]
+        lines += [
+            f"Memory of the compiled SE3 operations at N = {pretty_n_pow2(memory[0]['n'])}, "
+            f"{dtype}, MB:",
+            "",
+        ]
         header = ["op", "arguments", "output", "temporaries: jaxlie_geo", "temporaries: jaxlie"]
-        body = [[r["op"], f"{r['geo_args_mb']:.0f}", f"{r['geo_out_mb']:.0f}",
-                 f"{r['geo_temp_mb']:.1f}", f"{r['ref_temp_mb']:.1f}"] for r in memory]
+        body = [
+            [
+                r["op"],
+                f"{r['geo_args_mb']:.0f}",
+                f"{r['geo_out_mb']:.0f}",
+                f"{r['geo_temp_mb']:.1f}",
+                f"{r['ref_temp_mb']:.1f}",
+            ]
+            for r in memory
+        ]
         lines += table(header, body, "lrrrr") + [""]
     return lines
 
@@ -414,24 +446,39 @@ def _speed_notes(data: dict) -> list:
     if ones:
         lat = sorted(t for r in ones for t in (r["geo_ns_per_elem"], r["ref_ns_per_elem"]))
         lo, hi = lat[len(lat) // 10], lat[-1 - len(lat) // 10]
-        notes.append(f"At N = 1 a call takes {fmt_ns(lo)}–{fmt_ns(hi)} with either library "
-                     "(10th to 90th percentile): dispatch, not arithmetic.")
+        notes.append(
+            f"At N = 1 a call takes {fmt_ns(lo)}–{fmt_ns(hi)} with either library "
+            "(10th to 90th percentile): dispatch, not arithmetic."
+        )
     eager = data.get("eager_se3_exp")
     if eager:
-        notes.append(f"Eager `SE3.exp` of one tangent: {eager['geo_us']:.1f} µs against jaxlie's "
-                     f"{eager['ref_us']:.1f} µs per call (speed-up {eager['ratio']:.2f}).")
+        notes.append(
+            f"Eager `SE3.exp` of one tangent: {eager['geo_us']:.1f} µs against jaxlie's "
+            f"{eager['ref_us']:.1f} µs per call (speed-up {eager['ratio']:.2f})."
+        )
     slower = sorted((r for r in res if _slower(r)), key=lambda r: r["ratio"])
     if slower:
-        notes.append("Slower than jaxlie: " + ", ".join(
-            f"{r['group']} {r['op']} at {_n_at(r['n'])} ({r['ratio']:.2f})" for r in slower) + ".")
+        notes.append(
+            "Slower than jaxlie: "
+            + ", ".join(
+                f"{r['group']} {r['op']} at {_n_at(r['n'])} ({r['ratio']:.2f})" for r in slower
+            )
+            + "."
+        )
     else:
-        notes.append("No case where jaxlie_geo is slower "
-                     "(speed-up below 0.95 with the whole IQR below 1).")
+        notes.append(
+            "No case where jaxlie_geo is slower (speed-up below 0.95 with the whole IQR below 1)."
+        )
     differ = [r for r in res if not r["max_rel_diff"] < _tolerance(r)]
     if differ:
-        notes.append("Outputs differ beyond the tolerance (largest |Δ| / (1 + |jaxlie|)): "
-                     + ", ".join(f"{r['group']} {r['op']} at {_n_at(r['n'])} "
-                                 f"({r['max_rel_diff']:.2g})" for r in differ) + ".")
+        notes.append(
+            "Outputs differ beyond the tolerance (largest |Δ| / (1 + |jaxlie|)): "
+            + ", ".join(
+                f"{r['group']} {r['op']} at {_n_at(r['n'])} ({r['max_rel_diff']:.2g})"
+                for r in differ
+            )
+            + "."
+        )
     return notes
 
 
@@ -441,8 +488,19 @@ def pretty_n_pow2(n: int) -> str:
     return f"2{str(k).translate(SUPERSCRIPT)}" if n == 2**k and k > 3 else pretty_n(n)
 
 
-JAC_ORDER = ("jac_right", "jac_left", "jac_right_inv", "jac_left_inv", "jlog", "compose",
-             "inverse", "between", "rminus", "rplus", "apply")
+JAC_ORDER = (
+    "jac_right",
+    "jac_left",
+    "jac_right_inv",
+    "jac_left_inv",
+    "jlog",
+    "compose",
+    "inverse",
+    "between",
+    "rminus",
+    "rplus",
+    "apply",
+)
 
 
 def jacobians_section(raw: dict, order: list) -> list:
@@ -460,8 +518,9 @@ def _jacobian_table(data: dict) -> list:
     skipped = {(s["group"], s["case"]) for s in data.get("skipped_constant", [])}
     labels = {r["case"]: r["jacobian"] for r in res}
     cases = [c for c in JAC_ORDER if c in labels]
-    groups = [g for g in GROUPS
-              if any(r["group"] == g for r in res) or any(s[0] == g for s in skipped)]
+    groups = [
+        g for g in GROUPS if any(r["group"] == g for r in res) or any(s[0] == g for s in skipped)
+    ]
     lines = [f"### {label(info)}, {info.get('dtype', '?')}", ""]
     for n in sorted({r["n"] for r in res}):
         by = {(r["group"], r["case"]): r for r in res if r["n"] == n}
@@ -471,21 +530,32 @@ def _jacobian_table(data: dict) -> list:
             for g in groups:
                 r = by.get((g, c))
                 if r:
-                    row.append(f"{r['ratio']:.2f} ({_plain_ns(r['ours_ns_per_elem'])} / "
-                               f"{_plain_ns(r['jacfwd_ns_per_elem'])} ns)")
+                    row.append(
+                        f"{r['ratio']:.2f} ({_plain_ns(r['ours_ns_per_elem'])} / "
+                        f"{_plain_ns(r['jacfwd_ns_per_elem'])} ns)"
+                    )
                 else:
                     row.append("constant" if (g, c) in skipped else "")
             body.append(row)
-        lines += [f"jax {info.get('jax', '?')}, measured {_date(info)}, N = {pretty_n(n)}. "
-                  "Cells: speed-up (ns per element: closed form / jacfwd).", ""]
+        lines += [
+            f"jax {info.get('jax', '?')}, measured {_date(info)}, N = {pretty_n(n)}. "
+            "Cells: speed-up (ns per element: closed form / jacfwd).",
+            "",
+        ]
         lines += table(["Jacobian"] + groups, body, "l" + "r" * len(groups)) + [""]
         rs = [r for r in res if r["n"] == n]
-        means = ", ".join(f"{g} {geomean([r['ratio'] for r in rs if r['group'] == g]):.2f}"
-                          for g in groups if any(r["group"] == g for r in rs))
+        means = ", ".join(
+            f"{g} {geomean([r['ratio'] for r in rs if r['group'] == g]):.2f}"
+            for g in groups
+            if any(r["group"] == g for r in rs)
+        )
         overall = geomean([r["ratio"] for r in rs])
         worst = max(r["max_abs_diff_float64"] for r in rs)
-        lines += [f"- Geometric mean: {means}; overall {overall:.2f}.",
-                  f"- Largest difference from jacfwd in float64: {worst:.1e}.", ""]
+        lines += [
+            f"- Geometric mean: {means}; overall {overall:.2f}.",
+            f"- Largest difference from jacfwd in float64: {worst:.1e}.",
+            "",
+        ]
     return lines
 
 
@@ -505,14 +575,19 @@ def accuracy_section(raw: dict, order: list) -> list:
 
 def _accuracy_tables(data: dict) -> list:
     info, bounds, libs = data["machine"], data["bounds"], data["libs"]
-    cells = {(c["lib"], c["group"], c["op"], c["dtype"], c["regime"]): c["ulp"]
-             for c in data["cells"]}
+    cells = {
+        (c["lib"], c["group"], c["op"], c["dtype"], c["regime"]): c["ulp"] for c in data["cells"]
+    }
     groups = [g for g in GROUPS if any(k[1] == g for k in cells)]
     dtypes = [d for d in ("float32", "float64") if any(k[3] == d for k in cells)]
-    lines = [f"### {label(info)}", "",
-             f"jax {info.get('jax', '?')}, measured {_date(info)}, {data['samples']} samples per "
-             f"regime and translation norm. Worst error in ulp, cells {' / '.join(libs)}; "
-             "**bold**: over the bound.", ""]
+    lines = [
+        f"### {label(info)}",
+        "",
+        f"jax {info.get('jax', '?')}, measured {_date(info)}, {data['samples']} samples per "
+        f"regime and translation norm. Worst error in ulp, cells {' / '.join(libs)}; "
+        "**bold**: over the bound.",
+        "",
+    ]
 
     def cell(v, op):
         return fmt_ulp(v) if v is None or v <= bounds[op] else f"**{fmt_ulp(v)}**"
@@ -524,8 +599,11 @@ def _accuracy_tables(data: dict) -> list:
                 row = [g, op_label]
                 for reg in data["regimes"]:
                     vals = [cells.get((lib, g, op, dt, reg["key"])) for lib in libs]
-                    row.append("" if all(v is None for v in vals)
-                               else " / ".join(cell(v, op) for v in vals))
+                    row.append(
+                        ""
+                        if all(v is None for v in vals)
+                        else " / ".join(cell(v, op) for v in vals)
+                    )
                 body.append(row)
         header = ["group", "op"] + [r["label"] for r in data["regimes"]]
         lines += [f"**{dt}**", ""]
@@ -543,9 +621,12 @@ def render(raw: dict, plot_name: str | None) -> str:
     runs = plotted_runs(raw, order)
     if plot_name and runs:
         name = label(runs[0]["machine"])
-        lines += [f"![Speed-up over jaxlie by group, operation and batch size, {name}]"
-                  f"({plot_name})", "",
-                  f"*The plot: {name}; float32 filled, float64 hollow; bars are the IQR.*", ""]
+        lines += [
+            f"![Speed-up over jaxlie by group, operation and batch size, {name}]({plot_name})",
+            "",
+            f"*The plot: {name}; float32 filled, float64 hollow; bars are the IQR.*",
+            "",
+        ]
     lines += METHOD.splitlines() + [""]
     lines += machines_section(raw, order)
     lines += speed_section(raw, order)
@@ -582,13 +663,16 @@ def write_page(raw_dir: Path = RAW_DIR, page: Path = PAGE, plot: bool = True) ->
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--raw-dir", type=Path, default=RAW_DIR,
-                    help="raw results (default: %(default)s)")
+    ap.add_argument(
+        "--raw-dir", type=Path, default=RAW_DIR, help="raw results (default: %(default)s)"
+    )
     ap.add_argument("--page", type=Path, default=PAGE, help="page to write (default: %(default)s)")
     ap.add_argument("--no-plot", action="store_true", help="leave the plot as it is")
-    ap.add_argument("--check", action="store_true",
-                    help="write nothing; exit 1 if the page differs from what the raw files "
-                         "render to")
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="write nothing; exit 1 if the page differs from what the raw files render to",
+    )
     args = ap.parse_args(argv)
     if args.check:
         text = render(load(args.raw_dir), PLOT_NAME)

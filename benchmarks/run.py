@@ -54,8 +54,10 @@ from report import add_save_arguments, fmt_n, fmt_ns, geomean, save
 # Benchmark the checkout's jaxlie_geo (works with or without an install, and with a stale
 # editable install that predates jaxlie_geo/__init__.py).
 _REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if (os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
-        and _REPO_ROOT not in sys.path):
+if (
+    os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
+    and _REPO_ROOT not in sys.path
+):
     sys.path.insert(0, _REPO_ROOT)
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3")
@@ -75,27 +77,48 @@ def parse_args(argv=None):
         description="Benchmark jaxlie_geo against jaxlie (same process, interleaved, jit).",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--sizes", default=None,
-                   help="comma-separated batch sizes (default 1,1000,1000000; --quick: 1,100)")
-    p.add_argument("--groups", default=",".join(GROUPS),
-                   help="comma-separated subset of SO2,SE2,SO3,SE3")
-    p.add_argument("--ops", default=",".join(OPS),
-                   help="comma-separated subset of " + ",".join(OPS))
-    p.add_argument("--repeats", type=int, default=None,
-                   help="interleaved repetitions per (group, op, size); default: automatic, "
-                        "5..25 within a time budget per case")
+    p.add_argument(
+        "--sizes",
+        default=None,
+        help="comma-separated batch sizes (default 1,1000,1000000; --quick: 1,100)",
+    )
+    p.add_argument(
+        "--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3"
+    )
+    p.add_argument(
+        "--ops", default=",".join(OPS), help="comma-separated subset of " + ",".join(OPS)
+    )
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=None,
+        help="interleaved repetitions per (group, op, size); default: automatic, "
+        "5..25 within a time budget per case",
+    )
     p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     p.add_argument("--quick", action="store_true", help="small sizes and few repeats (smoke test)")
     p.add_argument("--markdown", action="store_true", help="print the result tables as markdown")
-    p.add_argument("--json", default=None, metavar="PATH",
-                   help="also write the raw results (the --save format) to PATH")
-    p.add_argument("--no-eager", action="store_true",
-                   help="skip the eager SE3.exp latency measurement")
-    p.add_argument("--memory-n", type=float, default=2**22,
-                   help="batch size of the memory table (SE3 ops, compiled, not run; 0 skips it)")
-    p.add_argument("--candidate", default="jaxlie_geo",
-                   help="module benchmarked against jaxlie (default jaxlie_geo; 'jaxlie' gives an "
-                        "A/A run that calibrates the harness: all ratios should be ~1)")
+    p.add_argument(
+        "--json",
+        default=None,
+        metavar="PATH",
+        help="also write the raw results (the --save format) to PATH",
+    )
+    p.add_argument(
+        "--no-eager", action="store_true", help="skip the eager SE3.exp latency measurement"
+    )
+    p.add_argument(
+        "--memory-n",
+        type=float,
+        default=2**22,
+        help="batch size of the memory table (SE3 ops, compiled, not run; 0 skips it)",
+    )
+    p.add_argument(
+        "--candidate",
+        default="jaxlie_geo",
+        help="module benchmarked against jaxlie (default jaxlie_geo; 'jaxlie' gives an "
+        "A/A run that calibrates the harness: all ratios should be ~1)",
+    )
     p.add_argument("--seed", type=int, default=0)
     add_save_arguments(p)
     args = p.parse_args(argv)
@@ -154,7 +177,10 @@ def git_commit() -> str:
     try:
         out = subprocess.run(
             ["git", "-C", _REPO_ROOT, "describe", "--always", "--dirty", "--abbrev=7"],
-            capture_output=True, text=True, timeout=10)
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
         return out.stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -224,6 +250,7 @@ def make_op(lib, group: str, op: str, native: bool):
 
         return interp
     if op == "grad":
+
         def loss(xi, pb):
             d = (G.exp(xi).inverse() @ G(pb)).log()
             return jnp.sum(d * d)
@@ -336,8 +363,13 @@ def paired_stats(t_a, t_b) -> dict:
     paired = [b / a for a, b in zip(t_a, t_b)]
     q1, q3 = quantiles(paired)
     med_a, med_b = statistics.median(t_a), statistics.median(t_b)
-    return {"median_a": med_a, "median_b": med_b, "ratio": statistics.median(paired),
-            "ratio_q1": q1, "ratio_q3": q3}
+    return {
+        "median_a": med_a,
+        "median_b": med_b,
+        "ratio": statistics.median(paired),
+        "ratio_q1": q1,
+        "ratio_q3": q3,
+    }
 
 
 def quantiles(xs):
@@ -405,11 +437,15 @@ def bench_case(geo, ref, native, group, op, n, args, dtype):
 
     st = paired_stats(t_geo, t_ref)
     return {
-        "group": group, "op": op, "n": n, "dtype": args.dtype,
+        "group": group,
+        "op": op,
+        "n": n,
+        "dtype": args.dtype,
         "geo_ns_per_elem": st["median_a"] * 1e9 / n,
         "ref_ns_per_elem": st["median_b"] * 1e9 / n,
         "ratio": st["ratio"],
-        "ratio_q1": st["ratio_q1"], "ratio_q3": st["ratio_q3"],
+        "ratio_q1": st["ratio_q1"],
+        "ratio_q3": st["ratio_q3"],
         "compile_geo_ms": comp_geo * 1e3,
         "compile_ref_ms": comp_ref * 1e3,
         "repeats": len(t_geo),
@@ -432,8 +468,14 @@ def eager_latency(geo, ref, args, dtype):
     med_geo, med_ref = statistics.median(t_geo), statistics.median(t_ref)
     paired = [r / g for g, r in zip(t_geo, t_ref)]
     q1, q3 = quantiles(paired)
-    return {"geo_us": med_geo * 1e6, "ref_us": med_ref * 1e6, "ratio": statistics.median(paired),
-            "ratio_q1": q1, "ratio_q3": q3, "repeats": len(t_geo)}
+    return {
+        "geo_us": med_geo * 1e6,
+        "ref_us": med_ref * 1e6,
+        "ratio": statistics.median(paired),
+        "ratio_q1": q1,
+        "ratio_q3": q3,
+        "repeats": len(t_geo),
+    }
 
 
 def global_warmup(geo, ref, dtype):
@@ -472,29 +514,49 @@ def memory_table(geo, ref, native, n: int, dtype, seed: int) -> list:
 def table_rows(results):
     rows = []
     for r in results:
-        rows.append([
-            r["group"], r["op"], fmt_n(r["n"]),
-            fmt_ns(r["geo_ns_per_elem"]), fmt_ns(r["ref_ns_per_elem"]),
-            f"{r['ratio']:.2f}", f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
-            f"{r['compile_geo_ms']:.0f}", f"{r['compile_ref_ms']:.0f}",
-        ])
+        rows.append(
+            [
+                r["group"],
+                r["op"],
+                fmt_n(r["n"]),
+                fmt_ns(r["geo_ns_per_elem"]),
+                fmt_ns(r["ref_ns_per_elem"]),
+                f"{r['ratio']:.2f}",
+                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
+                f"{r['compile_geo_ms']:.0f}",
+                f"{r['compile_ref_ms']:.0f}",
+            ]
+        )
     return rows
 
 
-HEADER = ["group", "op", "N", "jaxlie_geo /elem", "jaxlie /elem", "ratio",
-          "ratio IQR", "compile geo ms", "compile jaxlie ms"]
+HEADER = [
+    "group",
+    "op",
+    "N",
+    "jaxlie_geo /elem",
+    "jaxlie /elem",
+    "ratio",
+    "ratio IQR",
+    "compile geo ms",
+    "compile jaxlie ms",
+]
 
 
 def render(header, rows, markdown: bool) -> str:
     if markdown:
-        out = ["| " + " | ".join(header) + " |",
-               "|" + "|".join("---" if i < 3 else "--:" for i in range(len(header))) + "|"]
+        out = [
+            "| " + " | ".join(header) + " |",
+            "|" + "|".join("---" if i < 3 else "--:" for i in range(len(header))) + "|",
+        ]
         out += ["| " + " | ".join(r) + " |" for r in rows]
         return "\n".join(out)
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
-              for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(c.ljust(w) if i < 3 else c.rjust(w)
-                                   for i, (c, w) in enumerate(zip(cells, widths)))
+    widths = [
+        max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)
+    ]
+    line = lambda cells: "  ".join(
+        c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
+    )
     return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
 
 
@@ -505,16 +567,19 @@ def summary(results, markdown: bool, eager=None) -> str:
     sizes = sorted({r["n"] for r in results})
 
     def row(name, keep):
-        cells = [f"{geomean([r['ratio'] for r in results if keep(r) and r['n'] == n]):.2f}"
-                 for n in sizes]
+        cells = [
+            f"{geomean([r['ratio'] for r in results if keep(r) and r['n'] == n]):.2f}"
+            for n in sizes
+        ]
         return [name, *cells, f"{geomean([r['ratio'] for r in results if keep(r)]):.2f}"]
 
     rows = [row(o, lambda r, o=o: r["op"] == o) for o in ops]
     rows += [row(g, lambda r, g=g: r["group"] == g) for g in groups]
     rows.append(row("overall", lambda r: True))
     header = ["op"] + [fmt_n(n) for n in sizes] + ["all"]
-    lines.append("Geometric-mean ratio jaxlie/jaxlie_geo (>1: jaxlie_geo faster), "
-                 "by op and by group:")
+    lines.append(
+        "Geometric-mean ratio jaxlie/jaxlie_geo (>1: jaxlie_geo faster), by op and by group:"
+    )
     lines.append("")
     lines.append(render_simple(header, rows, markdown))
     # "slower" = median ratio below 0.95 and the whole paired-ratio IQR below 1 (A/A runs with
@@ -522,42 +587,55 @@ def summary(results, markdown: bool, eager=None) -> str:
     slower = [r for r in results if r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
     lines.append("")
     if eager is not None and eager["ratio"] < 0.95 and eager["ratio_q3"] < 1.0:
-        lines.append(f"Eager (no jit) SE3.exp, batch 1: jaxlie_geo is slower, "
-                     f"{eager['geo_us']:.1f} µs vs {eager['ref_us']:.1f} µs per call "
-                     f"(ratio {eager['ratio']:.3f}).")
+        lines.append(
+            f"Eager (no jit) SE3.exp, batch 1: jaxlie_geo is slower, "
+            f"{eager['geo_us']:.1f} µs vs {eager['ref_us']:.1f} µs per call "
+            f"(ratio {eager['ratio']:.3f})."
+        )
     if slower:
-        lines.append("Cases where jaxlie_geo is slower "
-                     "(ratio < 0.95 and whole paired-ratio IQR below 1):")
+        lines.append(
+            "Cases where jaxlie_geo is slower (ratio < 0.95 and whole paired-ratio IQR below 1):"
+        )
         for r in sorted(slower, key=lambda r: r["ratio"]):
-            lines.append(f"  {'- ' if markdown else ''}{r['group']} {r['op']} N={fmt_n(r['n'])}: "
-                         f"ratio {r['ratio']:.2f} ({fmt_ns(r['geo_ns_per_elem'])} vs "
-                         f"{fmt_ns(r['ref_ns_per_elem'])} per element)")
+            lines.append(
+                f"  {'- ' if markdown else ''}{r['group']} {r['op']} N={fmt_n(r['n'])}: "
+                f"ratio {r['ratio']:.2f} ({fmt_ns(r['geo_ns_per_elem'])} vs "
+                f"{fmt_ns(r['ref_ns_per_elem'])} per element)"
+            )
     else:
-        lines.append("No case where jaxlie_geo is clearly slower "
-                     "(ratio < 0.95 with paired-ratio IQR below 1).")
+        lines.append(
+            "No case where jaxlie_geo is clearly slower "
+            "(ratio < 0.95 with paired-ratio IQR below 1)."
+        )
     tol = 1e-3 if results and results[0].get("dtype") == "float32" else 1e-8
-    bad = [r for r in results
-           if not (r["max_rel_diff"] < (10 * tol if r["op"] == "grad" else tol))]
+    bad = [r for r in results if not (r["max_rel_diff"] < (10 * tol if r["op"] == "grad" else tol))]
     if bad:
         lines.append("")
-        lines.append("Note: outputs disagree between the libraries beyond the dtype's tolerance "
-                     "in these cases. Either a library is inaccurate there (see "
-                     "benchmarks/accuracy.py) or the two sides compute different things; check "
-                     "before trusting the ratio:")
+        lines.append(
+            "Note: outputs disagree between the libraries beyond the dtype's tolerance "
+            "in these cases. Either a library is inaccurate there (see "
+            "benchmarks/accuracy.py) or the two sides compute different things; check "
+            "before trusting the ratio:"
+        )
         for r in bad:
-            lines.append(f"  {r['group']} {r['op']} N={fmt_n(r['n'])}: "
-                         f"max |diff|/(1+|jaxlie|) = {r['max_rel_diff']:.3g}")
+            lines.append(
+                f"  {r['group']} {r['op']} N={fmt_n(r['n'])}: "
+                f"max |diff|/(1+|jaxlie|) = {r['max_rel_diff']:.3g}"
+            )
     return "\n".join(lines)
 
 
 def render_simple(header, rows, markdown):
     if markdown:
-        out = ["| " + " | ".join(header) + " |",
-               "|---|" + "|".join("--:" for _ in header[1:]) + "|"]
+        out = [
+            "| " + " | ".join(header) + " |",
+            "|---|" + "|".join("--:" for _ in header[1:]) + "|",
+        ]
         return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                                   for i, (c, w) in enumerate(zip(cells, widths)))
+    line = lambda cells: "  ".join(
+        c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
+    )
     return "\n".join([line(header)] + [line(r) for r in rows])
 
 
@@ -577,8 +655,9 @@ def main(argv=None):
     for k, v in info.items():
         print(f"  {k:13s} {v}")
     if not native:
-        print(f"  note: {args.candidate} has no interpolate(); "
-              "both sides use the explicit expression")
+        print(
+            f"  note: {args.candidate} has no interpolate(); both sides use the explicit expression"
+        )
     print(flush=True)
 
     t_start = time.perf_counter()
@@ -590,19 +669,25 @@ def main(argv=None):
             for n in args.sizes:
                 r = bench_case(geo, ref, native, group, op, n, args, dtype)
                 results.append(r)
-                print(f"{group:4s} {op:12s} N={fmt_n(r['n']):>6s}  "
-                      f"geo {fmt_ns(r['geo_ns_per_elem']):>10s}/el  "
-                      f"jaxlie {fmt_ns(r['ref_ns_per_elem']):>10s}/el  ratio {r['ratio']:5.2f} "
-                      f"[{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
-                      f"compile {r['compile_geo_ms']:5.0f}/{r['compile_ref_ms']:5.0f} ms  "
-                      f"x{r['repeats']}  reldiff {r['max_rel_diff']:.1e}", flush=True)
+                print(
+                    f"{group:4s} {op:12s} N={fmt_n(r['n']):>6s}  "
+                    f"geo {fmt_ns(r['geo_ns_per_elem']):>10s}/el  "
+                    f"jaxlie {fmt_ns(r['ref_ns_per_elem']):>10s}/el  ratio {r['ratio']:5.2f} "
+                    f"[{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
+                    f"compile {r['compile_geo_ms']:5.0f}/{r['compile_ref_ms']:5.0f} ms  "
+                    f"x{r['repeats']}  reldiff {r['max_rel_diff']:.1e}",
+                    flush=True,
+                )
 
     eager = None
     if not args.no_eager:
         eager = eager_latency(geo, ref, args, dtype)
-        print(f"eager SE3.exp (batch 1, no jit): geo {eager['geo_us']:.1f} µs  "
-              f"jaxlie {eager['ref_us']:.1f} µs  ratio {eager['ratio']:.2f} "
-              f"[{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}]", flush=True)
+        print(
+            f"eager SE3.exp (batch 1, no jit): geo {eager['geo_us']:.1f} µs  "
+            f"jaxlie {eager['ref_us']:.1f} µs  ratio {eager['ratio']:.2f} "
+            f"[{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}]",
+            flush=True,
+        )
 
     memory = None
     if args.memory_n:
@@ -610,33 +695,66 @@ def main(argv=None):
 
     elapsed = time.perf_counter() - t_start
     print()
-    print(f"## Results ({args.dtype}; per element = median time per call / N; ratio = median "
-          "over repetitions of jaxlie time / jaxlie_geo time, >1 means jaxlie_geo is faster; "
-          "IQR of those ratios)")
+    print(
+        f"## Results ({args.dtype}; per element = median time per call / N; ratio = median "
+        "over repetitions of jaxlie time / jaxlie_geo time, >1 means jaxlie_geo is faster; "
+        "IQR of those ratios)"
+    )
     print()
     print(render(HEADER, table_rows(results), args.markdown))
     print()
     if eager is not None:
-        eager_rows = [["SE3.exp eager, batch 1", f"{eager['geo_us']:.1f}", f"{eager['ref_us']:.1f}",
-                       f"{eager['ratio']:.2f}", f"{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}"]]
-        print(render_simple(["case", "jaxlie_geo µs/call", "jaxlie µs/call", "ratio", "ratio IQR"],
-                            eager_rows, args.markdown))
+        eager_rows = [
+            [
+                "SE3.exp eager, batch 1",
+                f"{eager['geo_us']:.1f}",
+                f"{eager['ref_us']:.1f}",
+                f"{eager['ratio']:.2f}",
+                f"{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}",
+            ]
+        ]
+        print(
+            render_simple(
+                ["case", "jaxlie_geo µs/call", "jaxlie µs/call", "ratio", "ratio IQR"],
+                eager_rows,
+                args.markdown,
+            )
+        )
         print()
     print(summary(results, args.markdown, eager))
     print()
     if memory is not None:
-        print(f"## Memory, SE3 at N = {fmt_n(int(args.memory_n))} ({args.dtype}; MB from XLA's "
-              "buffer assignment: arguments, output, temporaries)")
+        print(
+            f"## Memory, SE3 at N = {fmt_n(int(args.memory_n))} ({args.dtype}; MB from XLA's "
+            "buffer assignment: arguments, output, temporaries)"
+        )
         print()
-        print(render_simple(["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
-                            [[r["op"], f"{r['geo_args_mb']:.0f}", f"{r['geo_out_mb']:.0f}",
-                              f"{r['geo_temp_mb']:.1f}", f"{r['ref_temp_mb']:.1f}"]
-                             for r in memory], args.markdown))
+        print(
+            render_simple(
+                ["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
+                [
+                    [
+                        r["op"],
+                        f"{r['geo_args_mb']:.0f}",
+                        f"{r['geo_out_mb']:.0f}",
+                        f"{r['geo_temp_mb']:.1f}",
+                        f"{r['ref_temp_mb']:.1f}",
+                    ]
+                    for r in memory
+                ],
+                args.markdown,
+            )
+        )
         print()
     print(f"total benchmark time: {elapsed:.0f} s")
 
-    data = {"machine": info, "results": results, "eager_se3_exp": eager, "memory": memory,
-            "elapsed_s": elapsed}
+    data = {
+        "machine": info,
+        "results": results,
+        "eager_se3_exp": eager,
+        "memory": memory,
+        "elapsed_s": elapsed,
+    }
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(data, f, indent=1, ensure_ascii=False)

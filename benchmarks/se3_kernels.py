@@ -83,10 +83,13 @@ def main() -> None:
 
     err_exp = [ulp(np.asarray(se3_exp(jnp.asarray(x32), f))[:, 4:], ref[:, 4:]) for f in forms]
     err_log = [ulp(np.asarray(se3_log(jnp.asarray(p32), f))[:, :3], ref_log[:, :3]) for f in forms]
-    print(f"SE3 kernels, float32, N = {args.n}, {jax.devices()[0].platform}, "
-          f"median of {args.repeats}")
-    print("| form | exp ns/elem | log ns/elem | exp translation, θ in [π, 10π], |v| = 1e3 (ulp) "
-          "| log v, θ in π − [1e-6, 1e-2] (ulp) |")
+    print(
+        f"SE3 kernels, float32, N = {args.n}, {jax.devices()[0].platform}, median of {args.repeats}"
+    )
+    print(
+        "| form | exp ns/elem | log ns/elem | exp translation, θ in [π, 10π], |v| = 1e3 (ulp) "
+        "| log v, θ in π − [1e-6, 1e-2] (ulp) |"
+    )
     print("|---|--:|--:|--:|--:|")
     for i, f in enumerate(forms):
         print(f"| {f} | {t_exp[i]:.1f} | {t_log[i]:.1f} | {err_exp[i]:.1f} | {err_log[i]:.1f} |")

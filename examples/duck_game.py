@@ -118,53 +118,154 @@ def draw_2d(path: Path, g0: SE2, g8: SE2, xi, g3: SE2) -> None:
 
     fig, ax = plt.subplots(figsize=(7.6, 6.4), dpi=150)
     phi = onp.linspace(0, 2 * onp.pi, 361)
-    ax.plot(centre[0] + radius * onp.cos(phi), centre[1] + radius * onp.sin(phi),
-            ls=(0, (2, 3)), lw=0.9, color="0.6", zorder=1,
-            label=f"circle of the motion (r = {radius:.2f} m)")
+    ax.plot(
+        centre[0] + radius * onp.cos(phi),
+        centre[1] + radius * onp.sin(phi),
+        ls=(0, (2, 3)),
+        lw=0.9,
+        color="0.6",
+        zorder=1,
+        label=f"circle of the motion (r = {radius:.2f} m)",
+    )
     ax.plot(*centre, marker="+", ms=10, mew=1.5, color="0.4", ls="none", zorder=2)
-    ax.annotate("centre c", centre, xytext=(6, -12), textcoords="offset points",
-                fontsize=9, color="0.35")
+    ax.annotate(
+        "centre c", centre, xytext=(6, -12), textcoords="offset points", fontsize=9, color="0.35"
+    )
     ax.plot([centre[0], p0[0]], [centre[1], p0[1]], lw=0.8, color="0.6", zorder=1)
-    ax.plot(trail[:, 0], trail[:, 1], color=C_PATH, lw=2.0, zorder=3,
-            label=r"path $G_0\,\exp(t\,\xi)$, $0 \leq t \leq 8$")
-    ax.plot([p0[0], p8[0]], [p0[1], p8[1]], color="0.55", lw=1.0, ls="--", zorder=2,
-            label="chord (naive straight-line interpolation)")
+    ax.plot(
+        trail[:, 0],
+        trail[:, 1],
+        color=C_PATH,
+        lw=2.0,
+        zorder=3,
+        label=r"path $G_0\,\exp(t\,\xi)$, $0 \leq t \leq 8$",
+    )
+    ax.plot(
+        [p0[0], p8[0]],
+        [p0[1], p8[1]],
+        color="0.55",
+        lw=1.0,
+        ls="--",
+        zorder=2,
+        label="chord (naive straight-line interpolation)",
+    )
 
     # The duck's heading (its body x axis) once a second.
     L = 0.55
     u, v = L * onp.cos(ticks[:, 2]), L * onp.sin(ticks[:, 2])
-    ax.quiver(ticks[:, 0], ticks[:, 1], u, v, angles="xy", scale_units="xy", scale=1,
-              width=0.0045, headwidth=4, headlength=5, color="#3b6fb6", zorder=4,
-              label="heading (body x axis), every 1 s")
+    ax.quiver(
+        ticks[:, 0],
+        ticks[:, 1],
+        u,
+        v,
+        angles="xy",
+        scale_units="xy",
+        scale=1,
+        width=0.0045,
+        headwidth=4,
+        headlength=5,
+        color="#3b6fb6",
+        zorder=4,
+        label="heading (body x axis), every 1 s",
+    )
     for (x, y, _), t in zip(ticks, tk):
         if t in (0.0, T_BREAD, T_END):
             continue
         # Label on the outside of the circle.
         out = onp.array([x, y]) - centre
         out = out / onp.linalg.norm(out)
-        ax.annotate(f"{t:.0f} s", (x, y), xytext=(x + 0.38 * out[0], y + 0.38 * out[1]),
-                    fontsize=8, color="0.3", ha="center", va="center")
+        ax.annotate(
+            f"{t:.0f} s",
+            (x, y),
+            xytext=(x + 0.38 * out[0], y + 0.38 * out[1]),
+            fontsize=8,
+            color="0.3",
+            ha="center",
+            va="center",
+        )
 
     def key_pose(p, color, marker, label, text, offset):
-        ax.quiver([p[0]], [p[1]], [1.0 * onp.cos(p[2])], [1.0 * onp.sin(p[2])], angles="xy",
-                  scale_units="xy", scale=1, width=0.007, color=color, zorder=6)
-        ax.plot(p[0], p[1], marker=marker, ms=10, color=color, mec="k", mew=0.7, ls="none",
-                zorder=7, label=label)
-        ax.annotate(text, (p[0], p[1]), xytext=offset, textcoords="offset points",
-                    fontsize=9, color=color, fontweight="bold")
+        ax.quiver(
+            [p[0]],
+            [p[1]],
+            [1.0 * onp.cos(p[2])],
+            [1.0 * onp.sin(p[2])],
+            angles="xy",
+            scale_units="xy",
+            scale=1,
+            width=0.007,
+            color=color,
+            zorder=6,
+        )
+        ax.plot(
+            p[0],
+            p[1],
+            marker=marker,
+            ms=10,
+            color=color,
+            mec="k",
+            mew=0.7,
+            ls="none",
+            zorder=7,
+            label=label,
+        )
+        ax.annotate(
+            text,
+            (p[0], p[1]),
+            xytext=offset,
+            textcoords="offset points",
+            fontsize=9,
+            color=color,
+            fontweight="bold",
+        )
 
     key_pose(p0, C_START, "o", r"$G_0$ (t = 0, known)", "t = 0", (-14, -18))
     key_pose(p8, C_END, "s", r"$G_8$ (t = 8, measured)", "t = 8", (8, 8))
     key_pose(p3, C_T3, "*", r"$G_3 = G_0 \exp(3\xi)$ (found)", "t = 3", (8, -17))
-    ax.plot(*naive[:2], marker="X", ms=8, color="0.55", mec="k", mew=0.5, ls="none",
-            zorder=5, label="naive guess at t = 3")
+    ax.plot(
+        *naive[:2],
+        marker="X",
+        ms=8,
+        color="0.55",
+        mec="k",
+        mew=0.5,
+        ls="none",
+        zorder=5,
+        label="naive guess at t = 3",
+    )
 
-    ax.add_patch(Circle(BREAD, REACH, facecolor=C_BREAD, alpha=0.12, edgecolor=C_BREAD,
-                        lw=0.8, ls="--", zorder=0))
-    ax.plot(*BREAD, marker="h", ms=13, color="#e3b26b", mec=C_BREAD, mew=1.5, ls="none",
-            zorder=5, label=f"bread (reach {REACH} m)")
-    ax.annotate("bread", BREAD, xytext=(-44, 6), textcoords="offset points", fontsize=9,
-                color=C_BREAD, fontweight="bold")
+    ax.add_patch(
+        Circle(
+            BREAD,
+            REACH,
+            facecolor=C_BREAD,
+            alpha=0.12,
+            edgecolor=C_BREAD,
+            lw=0.8,
+            ls="--",
+            zorder=0,
+        )
+    )
+    ax.plot(
+        *BREAD,
+        marker="h",
+        ms=13,
+        color="#e3b26b",
+        mec=C_BREAD,
+        mew=1.5,
+        ls="none",
+        zorder=5,
+        label=f"bread (reach {REACH} m)",
+    )
+    ax.annotate(
+        "bread",
+        BREAD,
+        xytext=(-44, 6),
+        textcoords="offset points",
+        fontsize=9,
+        color=C_BREAD,
+        fontweight="bold",
+    )
 
     d = float(onp.linalg.norm(p3[:2] - BREAD))
     ax.set_title(
@@ -214,8 +315,9 @@ def draw_3d(path: Path, g0: SE3, g1: SE3, g8: SE3, xi, g3: SE3, xi_principal) ->
     n_dense = 801
     tf = onp.arange(0.0, T_END + 1e-9, 0.4)
     ts = onp.concatenate([onp.linspace(0.0, T_END, n_dense), tf])
-    paths = motion.pose_at(g0, jnp.stack([jnp.asarray(xi), jnp.asarray(xi_principal)]),
-                           jnp.asarray(ts)[:, None])
+    paths = motion.pose_at(
+        g0, jnp.stack([jnp.asarray(xi), jnp.asarray(xi_principal)]), jnp.asarray(ts)[:, None]
+    )
     positions = onp.asarray(paths.translation())  # (K, 2, 3)
     trail, short = positions[:n_dense, 0], positions[:n_dense, 1]
     origins = positions[n_dense:, 0]
@@ -243,12 +345,35 @@ def draw_3d(path: Path, g0: SE3, g1: SE3, g8: SE3, xi, g3: SE3, xi_principal) ->
     ]
     for g, c, m, text in marks:
         p = onp.asarray(g.translation())
-        ax.scatter(*p, color=c, marker=m, s=160 if m == "*" else 60, edgecolors="k",
-                   linewidths=0.6, depthshade=False, zorder=10)
-        ax.text(*(p + onp.array([0.0, 0.0, 0.12])), text, color=c, fontsize=9.5,
-                fontweight="bold", ha="center", zorder=11)
-    ax.scatter(*bread, marker="h", s=120, color="#e3b26b", edgecolors=C_BREAD,
-               linewidths=1.3, depthshade=False, zorder=9)
+        ax.scatter(
+            *p,
+            color=c,
+            marker=m,
+            s=160 if m == "*" else 60,
+            edgecolors="k",
+            linewidths=0.6,
+            depthshade=False,
+            zorder=10,
+        )
+        ax.text(
+            *(p + onp.array([0.0, 0.0, 0.12])),
+            text,
+            color=c,
+            fontsize=9.5,
+            fontweight="bold",
+            ha="center",
+            zorder=11,
+        )
+    ax.scatter(
+        *bread,
+        marker="h",
+        s=120,
+        color="#e3b26b",
+        edgecolors=C_BREAD,
+        linewidths=1.3,
+        depthshade=False,
+        zorder=9,
+    )
 
     lo = onp.minimum(trail.min(0), short.min(0)) - 0.3
     hi = onp.maximum(trail.max(0), short.max(0)) + 0.3
@@ -285,7 +410,8 @@ def draw_3d(path: Path, g0: SE3, g1: SE3, g8: SE3, xi, g3: SE3, xi_principal) ->
     ]
     labels = [
         r"path $G_0\exp(t\xi)$, $0 \leq t \leq 8$",
-        r"$G_0\exp(t\,\log(G_0^{-1}G_8)/8)$: from the end poses" "\n"
+        r"$G_0\exp(t\,\log(G_0^{-1}G_8)/8)$: from the end poses"
+        "\n"
         "alone (principal log: shortest screw)",
         r"screw axis of $\xi$",
         "body x / y / z axes every 0.4 s",
@@ -295,8 +421,15 @@ def draw_3d(path: Path, g0: SE3, g1: SE3, g8: SE3, xi, g3: SE3, xi_principal) ->
         r"$G_8 = G_0\exp(8\xi)$",
         "bread",
     ]
-    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(0.80, 0.5), fontsize=8,
-               framealpha=0.92, handler_map={tuple: HandlerTuple(ndivide=None, pad=0.2)})
+    fig.legend(
+        handles,
+        labels,
+        loc="center left",
+        bbox_to_anchor=(0.80, 0.5),
+        fontsize=8,
+        framealpha=0.92,
+        handler_map={tuple: HandlerTuple(ndivide=None, pad=0.2)},
+    )
     fig.subplots_adjust(left=0.0, right=0.80, bottom=0.02, top=0.93)
     fig.savefig(path, bbox_inches="tight")
     plt.close(fig)
@@ -304,8 +437,11 @@ def draw_3d(path: Path, g0: SE3, g1: SE3, g8: SE3, xi, g3: SE3, xi_principal) ->
 
 def _fmt(a, digits: int = 6, sign: str = "+") -> str:
     """'(x, y, ...)', with rounding noise such as -1e-17 shown as 0."""
-    return "(" + ", ".join(
-        f"{round(float(x), digits) + 0.0:{sign}.{digits}f}" for x in onp.ravel(a)) + ")"
+    return (
+        "("
+        + ", ".join(f"{round(float(x), digits) + 0.0:{sign}.{digits}f}" for x in onp.ravel(a))
+        + ")"
+    )
 
 
 def main(argv=None) -> None:
@@ -319,28 +455,40 @@ def main(argv=None) -> None:
     arc = motion.arc(g0, xi)
     dist = float(onp.linalg.norm(p3[:2] - BREAD))
     print("SE(2) duck game")
-    print(f"  G0 = x, y, heading {POSE_0[:2]}, {POSE_0[2]:.0f} deg;  "
-          f"G8 = {POSE_8[:2]}, {POSE_8[2]:.0f} deg")
+    print(
+        f"  G0 = x, y, heading {POSE_0[:2]}, {POSE_0[2]:.0f} deg;  "
+        f"G8 = {POSE_8[:2]}, {POSE_8[2]:.0f} deg"
+    )
     print(f"  body velocity xi = (vx, vy, omega) = {_fmt(xi)}  [m/s, m/s, rad/s]")
-    print(f"  pose at t = 3: x = {p3[0]:.6f} m, y = {p3[1]:.6f} m, "
-          f"heading = {onp.rad2deg(p3[2]):.4f} deg")
-    print(f"  arc: centre {_fmt(arc.centre)}, radius {float(arc.radius):.6f} m, "
-          f"curvature {float(arc.curvature):+.6f} 1/m")
-    print(f"  bread at {_fmt(BREAD)}: distance {dist:.3f} m -> "
-          + ("rescued!" if dist <= REACH else "missed."))
+    print(
+        f"  pose at t = 3: x = {p3[0]:.6f} m, y = {p3[1]:.6f} m, "
+        f"heading = {onp.rad2deg(p3[2]):.4f} deg"
+    )
+    print(
+        f"  arc: centre {_fmt(arc.centre)}, radius {float(arc.radius):.6f} m, "
+        f"curvature {float(arc.curvature):+.6f} 1/m"
+    )
+    print(
+        f"  bread at {_fmt(BREAD)}: distance {dist:.3f} m -> "
+        + ("rescued!" if dist <= REACH else "missed.")
+    )
 
     g0s, g1s, g8s, xis, g3s, xip = solve_3d()
     print("SE(3) duck game (helix)")
     print(f"  body velocity xi = (v, omega) = {_fmt(xis)}")
     print(f"  (true velocity                  {_fmt(XI_TRUE_3D)})")
     print(f"  from G0, G8 alone (principal):  {_fmt(xip)}")
-    print(f"  pose at t = 3: position = {_fmt(g3s.translation())} m, rotation vector = "
-          f"{_fmt(g3s.rotation().log())} rad")
+    print(
+        f"  pose at t = 3: position = {_fmt(g3s.translation())} m, rotation vector = "
+        f"{_fmt(g3s.rotation().log())} rad"
+    )
     print(f"                 (wxyz_xyz = {_fmt(g3s.wxyz_xyz)})")
     bread = bread_3d(g0s, xis, g3s)
     dist3 = float(onp.linalg.norm(onp.asarray(g3s.translation()) - bread))
-    print(f"  bread at {_fmt(bread)}: distance {dist3:.3f} m -> "
-          + ("rescued!" if dist3 <= REACH else "missed."))
+    print(
+        f"  bread at {_fmt(bread)}: distance {dist3:.3f} m -> "
+        + ("rescued!" if dist3 <= REACH else "missed.")
+    )
 
     draw_2d(args.out / "duck_game.png", g0, g8, xi, g3)
     draw_3d(args.out / "duck_game_3d.png", g0s, g1s, g8s, xis, g3s, xip)

@@ -117,7 +117,8 @@ def simulate_measurements(T_world_body_true, edge_i, edge_j, noise):
     T_world_b0 = T_world_body_true[0]
     _, rest = jax.lax.scan(step, T_world_b0, T_bi_bj_meas[: n - 1])
     T_world_body_odom = type(T_world_b0)(
-        jnp.concatenate([T_world_b0.parameters()[None], rest], axis=0))
+        jnp.concatenate([T_world_b0.parameters()[None], rest], axis=0)
+    )
     return T_bi_bj_meas, T_world_body_odom
 
 
@@ -127,7 +128,8 @@ def _build_graph(name, T_world_body_true, loop_i, loop_j, sigma, rng) -> PoseGra
     edge_j = onp.concatenate([onp.arange(1, n), loop_j]).astype(onp.int32)
     noise = rng.normal(size=(len(edge_i), len(sigma))) * sigma
     Z, T_world_body_odom = simulate_measurements(
-        T_world_body_true, jnp.asarray(edge_i), jnp.asarray(edge_j), jnp.asarray(noise))
+        T_world_body_true, jnp.asarray(edge_i), jnp.asarray(edge_j), jnp.asarray(noise)
+    )
     return PoseGraph(
         name=name,
         T_world_body_true=T_world_body_true,
@@ -145,8 +147,9 @@ SIGMA_SE2 = onp.array([0.05, 0.05, onp.deg2rad(1.0)])
 SIGMA_SE3 = onp.array([0.05, 0.05, 0.05, *[onp.deg2rad(1.0)] * 3])
 
 
-def make_manhattan_se2(n_poses: int, seed: int = 0, block: int = 3, blocks: int = 5,
-                       closure_prob: float = 0.25) -> PoseGraph:
+def make_manhattan_se2(
+    n_poses: int, seed: int = 0, block: int = 3, blocks: int = 5, closure_prob: float = 0.25
+) -> PoseGraph:
     """A walk on a Manhattan street grid of ``blocks × blocks`` blocks of ``block`` metres.
 
     One metre per step; at a crossing the robot goes straight (p = ½) or turns ±90°
@@ -164,8 +167,11 @@ def make_manhattan_se2(n_poses: int, seed: int = 0, block: int = 3, blocks: int 
     for _ in range(n_poses):
         if p[0] % block == 0 and p[1] % block == 0:  # at a crossing: choose a street
             options = [(h, 0.5), ((h + 1) % 4, 0.25), ((h + 3) % 4, 0.25)]
-            options = [(d, w) for d, w in options
-                       if onp.all((0 <= p + heading_dirs[d]) & (p + heading_dirs[d] <= size))]
+            options = [
+                (d, w)
+                for d, w in options
+                if onp.all((0 <= p + heading_dirs[d]) & (p + heading_dirs[d] <= size))
+            ]
             if not options:
                 options = [((h + 2) % 4, 1.0)]
             w = onp.array([o[1] for o in options])
@@ -176,7 +182,8 @@ def make_manhattan_se2(n_poses: int, seed: int = 0, block: int = 3, blocks: int 
     positions = onp.array(positions, dtype=onp.float64)
     theta = onp.array(headings) * (onp.pi / 2)
     T_world_body_true = SE2.from_xy_theta(
-        jnp.asarray(positions[:, 0]), jnp.asarray(positions[:, 1]), jnp.asarray(theta))
+        jnp.asarray(positions[:, 0]), jnp.asarray(positions[:, 1]), jnp.asarray(theta)
+    )
 
     seen: Dict[Tuple[int, int], List[int]] = {}
     loop_i, loop_j = [], []
@@ -187,8 +194,14 @@ def make_manhattan_se2(n_poses: int, seed: int = 0, block: int = 3, blocks: int 
                     loop_i.append(m)
                     loop_j.append(k)
         seen.setdefault((x, y), []).append(k)
-    return _build_graph("SE(2) Manhattan walk", T_world_body_true, onp.array(loop_i),
-                        onp.array(loop_j), SIGMA_SE2, rng)
+    return _build_graph(
+        "SE(2) Manhattan walk",
+        T_world_body_true,
+        onp.array(loop_i),
+        onp.array(loop_j),
+        SIGMA_SE2,
+        rng,
+    )
 
 
 def make_sphere_se3(turns: int, per_turn: int, seed: int = 0, radius: float = 5.0) -> PoseGraph:
@@ -202,24 +215,31 @@ def make_sphere_se3(turns: int, per_turn: int, seed: int = 0, radius: float = 5.
     s = onp.arange(n)
     lat = onp.deg2rad(-70.0 + 140.0 * s / (n - 1))
     lon = 2 * onp.pi * s / per_turn
-    p = radius * onp.stack([onp.cos(lat) * onp.cos(lon), onp.cos(lat) * onp.sin(lon),
-                            onp.sin(lat)], axis=-1)
+    p = radius * onp.stack(
+        [onp.cos(lat) * onp.cos(lon), onp.cos(lat) * onp.sin(lon), onp.sin(lat)], axis=-1
+    )
     # Direction of motion: derivative of p with respect to s.
     dlat, dlon = onp.deg2rad(140.0) / (n - 1), 2 * onp.pi / per_turn
-    tangent = radius * onp.stack([
-        -onp.sin(lat) * onp.cos(lon) * dlat - onp.cos(lat) * onp.sin(lon) * dlon,
-        -onp.sin(lat) * onp.sin(lon) * dlat + onp.cos(lat) * onp.cos(lon) * dlon,
-        onp.cos(lat) * dlat], axis=-1)
+    tangent = radius * onp.stack(
+        [
+            -onp.sin(lat) * onp.cos(lon) * dlat - onp.cos(lat) * onp.sin(lon) * dlon,
+            -onp.sin(lat) * onp.sin(lon) * dlat + onp.cos(lat) * onp.cos(lon) * dlon,
+            onp.cos(lat) * dlat,
+        ],
+        axis=-1,
+    )
     z_body = p / radius
     x_body = tangent - onp.sum(tangent * z_body, -1, keepdims=True) * z_body
     x_body /= onp.linalg.norm(x_body, axis=-1, keepdims=True)
     y_body = onp.cross(z_body, x_body)
     R_world_body = onp.stack([x_body, y_body, z_body], axis=-1)  # columns: body axes
     T_world_body_true = SE3.from_rotation_and_translation(
-        SO3.from_matrix(jnp.asarray(R_world_body)), jnp.asarray(p))
+        SO3.from_matrix(jnp.asarray(R_world_body)), jnp.asarray(p)
+    )
     loop_j = onp.arange(per_turn, n)
-    return _build_graph("SE(3) sphere", T_world_body_true, loop_j - per_turn, loop_j,
-                        SIGMA_SE3, rng)
+    return _build_graph(
+        "SE(3) sphere", T_world_body_true, loop_j - per_turn, loop_j, SIGMA_SE3, rng
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -262,8 +282,9 @@ def edge_jacobians_autodiff(T_world_bi, T_world_bj, T_bi_bj_meas):
     zero = jnp.zeros(G.tangent_dim, T_world_bi.parameters().dtype)
 
     def r_of(delta_i, delta_j):
-        return edge_residual(manifold.rplus(T_world_bi, delta_i),
-                             manifold.rplus(T_world_bj, delta_j), T_bi_bj_meas)
+        return edge_residual(
+            manifold.rplus(T_world_bi, delta_i), manifold.rplus(T_world_bj, delta_j), T_bi_bj_meas
+        )
 
     return jax.jacfwd(r_of, argnums=(0, 1))(zero, zero)
 
@@ -278,8 +299,9 @@ def linearise(T_world_body, edge_i, edge_j, T_bi_bj_meas):
 @jax.jit
 def linearise_autodiff(T_world_body, edge_i, edge_j, T_bi_bj_meas):
     """``edge_jacobians_autodiff`` on every edge (``jax.vmap``)."""
-    return jax.vmap(edge_jacobians_autodiff)(T_world_body[edge_i], T_world_body[edge_j],
-                                             T_bi_bj_meas)
+    return jax.vmap(edge_jacobians_autodiff)(
+        T_world_body[edge_i], T_world_body[edge_j], T_bi_bj_meas
+    )
 
 
 def jacobian_check(T_world_body, edge_i, edge_j, T_bi_bj_meas) -> Tuple[float, float, float]:
@@ -289,8 +311,11 @@ def jacobian_check(T_world_body, edge_i, edge_j, T_bi_bj_meas) -> Tuple[float, f
     A_i, A_j = linearise_autodiff(T_world_body, edge_i, edge_j, T_bi_bj_meas)
     space_dim = type(T_world_body).space_dim
     max_angle = onp.max(onp.linalg.norm(onp.asarray(r)[:, space_dim:], axis=-1))  # θ or ω
-    return (float(onp.max(onp.abs(onp.asarray(J_i - A_i)))),
-            float(onp.max(onp.abs(onp.asarray(J_j - A_j)))), float(max_angle))
+    return (
+        float(onp.max(onp.abs(onp.asarray(J_i - A_i)))),
+        float(onp.max(onp.abs(onp.asarray(J_j - A_j)))),
+        float(max_angle),
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -353,8 +378,13 @@ class SolveResult:
     seconds: float
 
 
-def optimise(graph: PoseGraph, method: str = "lm", max_iters: int = 30, rel_tol: float = 1e-9,
-             verbose: bool = True) -> SolveResult:
+def optimise(
+    graph: PoseGraph,
+    method: str = "lm",
+    max_iters: int = 30,
+    rel_tol: float = 1e-9,
+    verbose: bool = True,
+) -> SolveResult:
     """Levenberg–Marquardt (``"lm"``: Marquardt's diagonal damping, λ ÷ 10 after a step
     that lowers the cost, λ × 10 and retry after one that does not) or plain Gauss–Newton
     (``"gn"``: λ = 0, every step taken). Stops when the relative decrease of the cost falls
@@ -368,8 +398,7 @@ def optimise(graph: PoseGraph, method: str = "lm", max_iters: int = 30, rel_tol:
 
     def normal_equations_at(T_world_body):
         r, J_i, J_j = linearise(T_world_body, *edges)
-        return normal_equations(r, J_i, J_j, graph.edge_i, graph.edge_j, graph.sqrt_info,
-                                n_poses=n)
+        return normal_equations(r, J_i, J_j, graph.edge_i, graph.edge_j, graph.sqrt_info, n_poses=n)
 
     T = graph.T_world_body_odom
     t0 = time.perf_counter()
@@ -396,8 +425,10 @@ def optimise(graph: PoseGraph, method: str = "lm", max_iters: int = 30, rel_tol:
         if verbose:
             status = "accepted" if accepted else f"rejected (trial cost {new_cost:.3e})"
             lam_text = f"  lambda {lam:.0e}" if method == "lm" else ""
-            print(f"    iter {it:3d}  cost {cost:.6e}  max|delta| {step:.2e}{lam_text}  "
-                  f"{status}  ({1e3 * (time.perf_counter() - ti):.0f} ms)")
+            print(
+                f"    iter {it:3d}  cost {cost:.6e}  max|delta| {step:.2e}{lam_text}  "
+                f"{status}  ({1e3 * (time.perf_counter() - ti):.0f} ms)"
+            )
         if accepted and (abs(rel_decrease) < rel_tol or step < 1e-12):
             break
     jax.block_until_ready(T.parameters())
@@ -424,10 +455,13 @@ def run_problem(graph: PoseGraph, method: str, max_iters: int) -> Dict[str, Any]
     n, k = graph.n_poses, type(graph.T_world_body_true).tangent_dim
     n_loops = graph.n_edges - graph.n_odometry
     print(f"{graph.name}: {n} poses, {graph.n_odometry} odometry edges + {n_loops} loop closures")
-    *check, max_angle = jacobian_check(graph.T_world_body_odom, graph.edge_i, graph.edge_j,
-                                       graph.T_bi_bj_meas)
-    print(f"  Jacobian check at the odometry initialisation, all {graph.n_edges} residuals "
-          f"(rotation part up to {onp.rad2deg(max_angle):.0f} deg):")
+    *check, max_angle = jacobian_check(
+        graph.T_world_body_odom, graph.edge_i, graph.edge_j, graph.T_bi_bj_meas
+    )
+    print(
+        f"  Jacobian check at the odometry initialisation, all {graph.n_edges} residuals "
+        f"(rotation part up to {onp.rad2deg(max_angle):.0f} deg):"
+    )
     print(f"    max |analytic - jax.jacfwd|: dr/dT_i {check[0]:.1e}, dr/dT_j {check[1]:.1e}")
     name = {"lm": "Levenberg-Marquardt", "gn": "Gauss-Newton"}[method]
     print(f"  {name}, dense {n * k} x {n * k} normal equations, first pose anchored")
@@ -435,19 +469,34 @@ def run_problem(graph: PoseGraph, method: str, max_iters: int) -> Dict[str, Any]
     # At the optimum, 2F is χ² with (E − N + 1)·k degrees of freedom (measurements minus
     # free parameters) if the noise model is right: F ≈ dof/2 ± sqrt(dof/2).
     dof = (graph.n_edges - n + 1) * k
-    print(f"  {result.iterations} iterations ({result.rejected} rejected), "
-          f"{result.seconds:.2f} s (incl. compilation)")
-    print(f"  cost {result.costs[0]:.4e} -> {result.costs[-1]:.4e}  "
-          f"(expected at the optimum: {dof / 2:.0f} +- {onp.sqrt(dof / 2):.0f}, "
-          f"half a chi-square with {dof} dof)")
+    print(
+        f"  {result.iterations} iterations ({result.rejected} rejected), "
+        f"{result.seconds:.2f} s (incl. compilation)"
+    )
+    print(
+        f"  cost {result.costs[0]:.4e} -> {result.costs[-1]:.4e}  "
+        f"(expected at the optimum: {dof / 2:.0f} +- {onp.sqrt(dof / 2):.0f}, "
+        f"half a chi-square with {dof} dof)"
+    )
     before = [float(x) for x in trajectory_errors(graph.T_world_body_odom, graph.T_world_body_true)]
     after = [float(x) for x in trajectory_errors(result.T_world_body, graph.T_world_body_true)]
-    print(f"  error vs ground truth, odometry : position RMSE {before[0]:8.4f} m, "
-          f"rotation RMSE {before[1]:8.4f} deg")
-    print(f"  error vs ground truth, optimised: position RMSE {after[0]:8.4f} m, "
-          f"rotation RMSE {after[1]:8.4f} deg")
-    return dict(graph=graph, result=result, check=check, max_angle=max_angle, dof=dof,
-                before=before, after=after)
+    print(
+        f"  error vs ground truth, odometry : position RMSE {before[0]:8.4f} m, "
+        f"rotation RMSE {before[1]:8.4f} deg"
+    )
+    print(
+        f"  error vs ground truth, optimised: position RMSE {after[0]:8.4f} m, "
+        f"rotation RMSE {after[1]:8.4f} deg"
+    )
+    return dict(
+        graph=graph,
+        result=result,
+        check=check,
+        max_angle=max_angle,
+        dof=dof,
+        before=before,
+        after=after,
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -458,14 +507,16 @@ C_TRUE, C_ODOM, C_OPT = "0.1", "#d95f02", "#1f63b4"
 
 def _positions(T_world_body) -> onp.ndarray:
     """Translations as numpy, read from the parameters (x, y last for SE(2) and SE(3))."""
-    return onp.asarray(T_world_body.parameters())[:, -type(T_world_body).space_dim:]
+    return onp.asarray(T_world_body.parameters())[:, -type(T_world_body).space_dim :]
 
 
 def _title(res: Dict[str, Any], tag: str) -> str:
     g, b, a = res["graph"], res["before"], res["after"]
-    return (f"({tag}) {g.name}: {g.n_poses} poses, {g.n_edges - g.n_odometry} loop closures\n"
-            f"RMSE vs truth: odometry {b[0]:.2f} m, {b[1]:.1f}°  →  "
-            f"optimised {a[0]:.2f} m, {a[1]:.2f}°")
+    return (
+        f"({tag}) {g.name}: {g.n_poses} poses, {g.n_edges - g.n_odometry} loop closures\n"
+        f"RMSE vs truth: odometry {b[0]:.2f} m, {b[1]:.1f}°  →  "
+        f"optimised {a[0]:.2f} m, {a[1]:.2f}°"
+    )
 
 
 def draw(path: Path, r2: Dict[str, Any], r3: Dict[str, Any]) -> None:
@@ -476,8 +527,16 @@ def draw(path: Path, r2: Dict[str, Any], r3: Dict[str, Any]) -> None:
     from matplotlib.lines import Line2D
 
     fig = plt.figure(figsize=(17.0, 6.4), dpi=140)
-    gs = fig.add_gridspec(1, 3, width_ratios=[1.0, 1.05, 0.78], wspace=0.22,
-                          left=0.04, right=0.985, bottom=0.16, top=0.86)
+    gs = fig.add_gridspec(
+        1,
+        3,
+        width_ratios=[1.0, 1.05, 0.78],
+        wspace=0.22,
+        left=0.04,
+        right=0.985,
+        bottom=0.16,
+        top=0.86,
+    )
     style_odom = dict(color=C_ODOM, lw=1.0, ls="--")
     style_true = dict(color=C_TRUE, lw=3.4, alpha=0.22, solid_capstyle="round")
     style_opt = dict(color=C_OPT, lw=1.0)
@@ -509,26 +568,36 @@ def draw(path: Path, r2: Dict[str, Any], r3: Dict[str, Any]) -> None:
     pts = onp.concatenate([true, odom, opt])
     lo, hi = pts.min(0), pts.max(0)
     mid, half = (lo + hi) / 2, (hi - lo).max() / 2
-    ax.set(xlim=(mid[0] - half, mid[0] + half), ylim=(mid[1] - half, mid[1] + half),
-           zlim=(mid[2] - half, mid[2] + half))
+    ax.set(
+        xlim=(mid[0] - half, mid[0] + half),
+        ylim=(mid[1] - half, mid[1] + half),
+        zlim=(mid[2] - half, mid[2] + half),
+    )
     ax.set_box_aspect((1, 1, 1), zoom=1.05)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
     ax.view_init(elev=16, azim=-58)
     # Axes3D titles sit lower than 2D ones; place it like the others, on the slot's top.
-    ax.text2D(0.5, 1.0, _title(r3, "b"), transform=ax.transAxes, ha="center", va="bottom",
-              fontsize=10.5)
+    ax.text2D(
+        0.5, 1.0, _title(r3, "b"), transform=ax.transAxes, ha="center", va="bottom", fontsize=10.5
+    )
 
     # (c) cost per iteration, and the expected minimum.
     ax = fig.add_subplot(gs[2])
     for res, color, marker in ((r2, "#1b9e77", "o"), (r3, "#7570b3", "s")):
         c = onp.asarray(res["result"].costs)
-        ax.semilogy(onp.arange(len(c)), c, color=color, marker=marker, ms=4.5, lw=1.4,
-                    label=res["graph"].name)
+        ax.semilogy(
+            onp.arange(len(c)),
+            c,
+            color=color,
+            marker=marker,
+            ms=4.5,
+            lw=1.4,
+            label=res["graph"].name,
+        )
         ax.axhline(res["dof"] / 2, color=color, lw=0.9, ls=":")
-    ax.plot([], [], color="0.35", lw=0.9, ls=":",
-            label="expected minimum: ½χ² with (E−N+1)·k dof")
+    ax.plot([], [], color="0.35", lw=0.9, ls=":", label="expected minimum: ½χ² with (E−N+1)·k dof")
     ax.set_xlabel("iteration")
     ax.set_ylabel(r"cost $F = \frac{1}{2}\,\sum\, \|W\, r_{ij}\|^2$")
     ax.xaxis.get_major_locator().set_params(integer=True)
@@ -537,18 +606,35 @@ def draw(path: Path, r2: Dict[str, Any], r3: Dict[str, Any]) -> None:
     ax.set_title(f"(c) {method}: cost per iteration", fontsize=10.5)
     ax.legend(fontsize=8.5, loc="upper right", framealpha=0.92)
 
-    handles = [Line2D([], [], **style_odom), Line2D([], [], **style_true),
-               Line2D([], [], **style_opt),
-               Line2D([], [], color="k", marker="o", ms=6, ls="none")]
-    labels = ["initial estimate: chained odometry", "ground truth", "optimised",
-              "first pose (anchored, known)"]
-    fig.legend(handles, labels, loc="lower center", bbox_to_anchor=(0.36, 0.0), ncol=4,
-               fontsize=9.5, frameon=False)
-    fig.suptitle("Pose-graph optimisation on SE(2) and SE(3) with closed-form Jacobians: "
-                 r"$r_{ij} = \log(Z_{ij}^{-1}\, T_i^{-1} T_j)$, "
-                 r"$J_i = -J_l^{-1}(r_{ij})\,\mathrm{Ad}(Z_{ij}^{-1})$, "
-                 r"$J_j = J_r^{-1}(r_{ij})$",
-                 fontsize=12.5, y=0.985)
+    handles = [
+        Line2D([], [], **style_odom),
+        Line2D([], [], **style_true),
+        Line2D([], [], **style_opt),
+        Line2D([], [], color="k", marker="o", ms=6, ls="none"),
+    ]
+    labels = [
+        "initial estimate: chained odometry",
+        "ground truth",
+        "optimised",
+        "first pose (anchored, known)",
+    ]
+    fig.legend(
+        handles,
+        labels,
+        loc="lower center",
+        bbox_to_anchor=(0.36, 0.0),
+        ncol=4,
+        fontsize=9.5,
+        frameon=False,
+    )
+    fig.suptitle(
+        "Pose-graph optimisation on SE(2) and SE(3) with closed-form Jacobians: "
+        r"$r_{ij} = \log(Z_{ij}^{-1}\, T_i^{-1} T_j)$, "
+        r"$J_i = -J_l^{-1}(r_{ij})\,\mathrm{Ad}(Z_{ij}^{-1})$, "
+        r"$J_j = J_r^{-1}(r_{ij})$",
+        fontsize=12.5,
+        y=0.985,
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
@@ -560,8 +646,12 @@ def draw(path: Path, r2: Dict[str, Any], r3: Dict[str, Any]) -> None:
 def main(argv=None) -> Dict[str, Dict[str, Any]]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="few poses, few iterations")
-    parser.add_argument("--method", choices=("lm", "gn"), default="lm",
-                        help="Levenberg-Marquardt (default) or plain Gauss-Newton")
+    parser.add_argument(
+        "--method",
+        choices=("lm", "gn"),
+        default="lm",
+        help="Levenberg-Marquardt (default) or plain Gauss-Newton",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("out/pose_graph.png"))
     args = parser.parse_args(argv)
@@ -575,10 +665,14 @@ def main(argv=None) -> Dict[str, Dict[str, Any]]:
         graph_2d = make_manhattan_se2(n_poses=500, seed=args.seed)
         graph_3d = make_sphere_se3(turns=8, per_turn=32, seed=args.seed)
         max_iters = 30
-    print(f"Pose-graph optimisation on {jax.devices()[0].platform}, float64, "
-          f"method {args.method}, seed {args.seed}")
-    results = {"2d": run_problem(graph_2d, args.method, max_iters),
-               "3d": run_problem(graph_3d, args.method, max_iters)}
+    print(
+        f"Pose-graph optimisation on {jax.devices()[0].platform}, float64, "
+        f"method {args.method}, seed {args.seed}"
+    )
+    results = {
+        "2d": run_problem(graph_2d, args.method, max_iters),
+        "3d": run_problem(graph_3d, args.method, max_iters),
+    }
     draw(args.out, results["2d"], results["3d"])
     print(f"Wrote {args.out}  (total {time.perf_counter() - t0:.1f} s)")
     return results

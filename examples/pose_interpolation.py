@@ -197,10 +197,22 @@ def draw_geodesics(path: Path, frames_per_path: int = 12) -> None:
             for axis, rgb in enumerate(("red", "green", "blue")):
                 tip = origins[k, j] + scale * length * axes[k, j, :, axis]
                 ax.plot(*onp.stack([origins[k, j], tip]).T, color=rgb, lw=width)
-        ax.text(*(origins[0, j] + [-0.25, 0, 0]), "a", fontsize=12, ha="right", va="center",
-                weight="bold")
-        ax.text(*(origins[-1, j] + [0.25, 0, 0]), "b", fontsize=12, ha="left", va="center",
-                weight="bold")
+        ax.text(
+            *(origins[0, j] + [-0.25, 0, 0]),
+            "a",
+            fontsize=12,
+            ha="right",
+            va="center",
+            weight="bold",
+        )
+        ax.text(
+            *(origins[-1, j] + [0.25, 0, 0]),
+            "b",
+            fontsize=12,
+            ha="left",
+            va="center",
+            weight="bold",
+        )
 
     lo, hi = onp.min(trail, axis=(0, 1)) - 0.5, onp.max(trail, axis=(0, 1)) + 0.5
     ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
@@ -218,8 +230,13 @@ def draw_geodesics(path: Path, frames_per_path: int = 12) -> None:
     )
     handles = [Line2D([], [], color=c, lw=2.5) for c in ("red", "green", "blue")]
     handles.append(Line2D([], [], color="0.45", lw=1.2))
-    fig.legend(handles, ["frame x axis", "frame y axis", "frame z axis", "translation path"],
-               loc="upper left", bbox_to_anchor=(0.02, 0.9), fontsize=9)
+    fig.legend(
+        handles,
+        ["frame x axis", "frame y axis", "frame z axis", "translation path"],
+        loc="upper left",
+        bbox_to_anchor=(0.02, 0.9),
+        fontsize=9,
+    )
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
@@ -247,8 +264,10 @@ def main() -> None:
     b = SE3.sample_uniform(key_b, batch_axes=(n,), dtype=jnp.float32)
     t = jax.random.uniform(key_t, (n,), dtype=jnp.float32)
     jax.block_until_ready((a, b, t))
-    print(f"Interpolating {n:,} SE3 pose pairs (float32) on {jax.devices()[0].platform}, "
-          f"{os.cpu_count()} CPU cores")
+    print(
+        f"Interpolating {n:,} SE3 pose pairs (float32) on {jax.devices()[0].platform}, "
+        f"{os.cpu_count()} CPU cores"
+    )
 
     # -- Speed. The first call traces and compiles; later calls reuse the kernel. -------
     compile_s = _time_call(interpolate_ours, a, b, t)
@@ -264,12 +283,16 @@ def main() -> None:
         if jaxlie is not None:
             jaxlie_runs.append(_time_call(interpolate_jaxlie, a_jl, b_jl, t))
     ours = statistics.median(ours_runs) / n  # seconds per pose
-    print(f"  jaxlie_geo, one jit call               {_fmt_time(ours):>9}/pose "
-          f"({_fmt_time(ours * n)} per call, median of {repeats} runs)")
+    print(
+        f"  jaxlie_geo, one jit call               {_fmt_time(ours):>9}/pose "
+        f"({_fmt_time(ours * n)} per call, median of {repeats} runs)"
+    )
     if jaxlie is not None:
         theirs = statistics.median(jaxlie_runs) / n
-        print(f"  jaxlie 1.5, same expression, jit       {_fmt_time(theirs):>9}/pose "
-              f"-> jaxlie_geo is {theirs / ours:.1f}x faster")
+        print(
+            f"  jaxlie 1.5, same expression, jit       {_fmt_time(theirs):>9}/pose "
+            f"-> jaxlie_geo is {theirs / ours:.1f}x faster"
+        )
     else:
         print("  jaxlie not installed: no jaxlie comparison (pip install 'jaxlie==1.5.*')")
 
@@ -278,8 +301,10 @@ def main() -> None:
     start = time.perf_counter()
     loop_result = onp.stack([numpy_interpolate_one(pa[i], pb[i], tt[i]) for i in range(loop_n)])
     numpy_loop = (time.perf_counter() - start) / loop_n
-    print(f"  Python loop, NumPy per pose            {_fmt_time(numpy_loop):>9}/pose "
-          f"-> jaxlie_geo is {numpy_loop / ours:,.0f}x faster")
+    print(
+        f"  Python loop, NumPy per pose            {_fmt_time(numpy_loop):>9}/pose "
+        f"-> jaxlie_geo is {numpy_loop / ours:,.0f}x faster"
+    )
 
     pa32, pb32, tt32 = (onp.asarray(x[:loop_n]) for x in (a.wxyz_xyz, b.wxyz_xyz, t))
     SE3(pa32[0]).interpolate(SE3(pb32[0]), tt32[0])  # compile the unbatched kernel first
@@ -287,10 +312,14 @@ def main() -> None:
     for i in range(loop_n):
         jax.block_until_ready(SE3(pa32[i]).interpolate(SE3(pb32[i]), tt32[i]))
     eager_loop = (time.perf_counter() - start) / loop_n
-    print(f"  Python loop, jaxlie_geo call per pose  {_fmt_time(eager_loop):>9}/pose "
-          f"-> jaxlie_geo is {eager_loop / ours:,.0f}x faster")
-    print(f"    (loops timed on {loop_n} pairs, extrapolated to {n:,}: "
-          f"{_fmt_time(numpy_loop * n)} and {_fmt_time(eager_loop * n)})")
+    print(
+        f"  Python loop, jaxlie_geo call per pose  {_fmt_time(eager_loop):>9}/pose "
+        f"-> jaxlie_geo is {eager_loop / ours:,.0f}x faster"
+    )
+    print(
+        f"    (loops timed on {loop_n} pairs, extrapolated to {n:,}: "
+        f"{_fmt_time(numpy_loop * n)} and {_fmt_time(eager_loop * n)})"
+    )
 
     # -- Accuracy. -----------------------------------------------------------------------
     print("Accuracy (float32 results)")
@@ -303,8 +332,10 @@ def main() -> None:
         ref = numpy_interpolate_one(pa[worst], pb[worst], tt[worst])
         ours_err = onp.max(onp.abs(onp.asarray(ours_out[worst].as_matrix()) - ref))
         jaxlie_err = onp.max(onp.abs(onp.asarray(jaxlie_out.as_matrix()[worst]) - ref))
-        print(f"    worst pair #{worst:,} vs a float64 NumPy reference: "
-              f"ours {ours_err:.1e}, jaxlie {jaxlie_err:.1e}")
+        print(
+            f"    worst pair #{worst:,} vs a float64 NumPy reference: "
+            f"ours {ours_err:.1e}, jaxlie {jaxlie_err:.1e}"
+        )
     ref_diff = onp.max(onp.abs(loop_result - onp.asarray(ours_out.as_matrix()[:loop_n])))
     print(f"  max |ours - float64 NumPy| over the {loop_n} looped pairs: {ref_diff:.2e}")
 

@@ -233,8 +233,14 @@ def fit(T_init: SE3, problem: Problem, iters: int, lr: float, progress: bool):
     step = make_step(optimizer)
     T, opt_state = T_init, optimizer.init(manifold.zero_tangents(T_init))
     history = []
-    bar = tqdm(range(iters), desc="fitting", unit="it", disable=not progress,
-               file=sys.stderr, dynamic_ncols=True)
+    bar = tqdm(
+        range(iters),
+        desc="fitting",
+        unit="it",
+        disable=not progress,
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )
     start = time.perf_counter()
     for i in bar:
         T, opt_state, values = step(T, opt_state, problem)
@@ -280,8 +286,17 @@ C_TRUE, C_OBS, C_FIT, C_GAP, C_NAIVE = "0.1", "#e6873c", "#2166ac", "#b2182b", "
 C_AXES = ("#d62728", "#2ca02c", "#1f3fbf")  # body x, y, z
 
 
-def draw(path: Path, T_true: SE3, Z: SE3, T_fit: SE3, T_naive: SE3, observed: onp.ndarray,
-         history: onp.ndarray, loss_true: float, n_frames: int = 9) -> None:
+def draw(
+    path: Path,
+    T_true: SE3,
+    Z: SE3,
+    T_fit: SE3,
+    T_naive: SE3,
+    observed: onp.ndarray,
+    history: onp.ndarray,
+    loss_true: float,
+    n_frames: int = 9,
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -292,24 +307,40 @@ def draw(path: Path, T_true: SE3, Z: SE3, T_fit: SE3, T_naive: SE3, observed: on
     K = observed.shape[0]
     missing = ~observed
     p_true, p_obs, p_fit = (onp.asarray(T.translation()) for T in (T_true, Z, T_fit))
-    errors = {name: pose_errors(T, T_true) for name, T in
-              (("reports", Z), ("naive", T_naive), ("fit", T_fit))}
+    errors = {
+        name: pose_errors(T, T_true)
+        for name, T in (("reports", Z), ("naive", T_naive), ("fit", T_fit))
+    }
 
     fig = plt.figure(figsize=(14, 7.6), dpi=130)
-    gs = fig.add_gridspec(1, 2, width_ratios=[1.3, 1.0], wspace=0.2, left=0.0, right=0.985,
-                          top=0.885, bottom=0.075)
+    gs = fig.add_gridspec(
+        1, 2, width_ratios=[1.3, 1.0], wspace=0.2, left=0.0, right=0.985, top=0.885, bottom=0.075
+    )
     gs_right = gs[0, 1].subgridspec(2, 1, height_ratios=[2.0, 1.1], hspace=0.3)
     gs_err = gs_right[0].subgridspec(2, 1, hspace=0.08)
 
     # -- 3D view: truth, reports, fit; orientation frames of truth and fit. --------------
     ax = fig.add_subplot(gs[0, 0], projection="3d")
     ax.plot(*p_true.T, color=C_TRUE, lw=1.0, ls=(0, (4, 2)), label="ground truth")
-    ax.scatter(*p_obs[observed].T, s=9, color=C_OBS, alpha=0.85, depthshade=False,
-               label=f"noisy reports ({observed.sum()} of {K} poses)")
+    ax.scatter(
+        *p_obs[observed].T,
+        s=9,
+        color=C_OBS,
+        alpha=0.85,
+        depthshade=False,
+        label=f"noisy reports ({observed.sum()} of {K} poses)",
+    )
     ax.plot(*p_fit.T, color=C_FIT, lw=2.0, label="fit")
-    ax.scatter(*p_fit[missing].T, s=16, marker="o", facecolors="none", edgecolors=C_GAP,
-               linewidths=0.9, depthshade=False,
-               label=f"fit where the report is missing ({missing.sum()})")
+    ax.scatter(
+        *p_fit[missing].T,
+        s=16,
+        marker="o",
+        facecolors="none",
+        edgecolors=C_GAP,
+        linewidths=0.9,
+        depthshade=False,
+        label=f"fit where the report is missing ({missing.sum()})",
+    )
     length = 0.42
     for i in onp.linspace(0, K, n_frames, endpoint=False).astype(int) + K // (2 * n_frames):
         for T, lw, alpha in ((T_true, 1.2, 0.4), (T_fit, 2.2, 1.0)):
@@ -328,21 +359,36 @@ def draw(path: Path, T_true: SE3, Z: SE3, T_fit: SE3, T_naive: SE3, observed: on
     handles, labels = ax.get_legend_handles_labels()
     handles.append(tuple(Line2D([], [], color=c, lw=2.2) for c in C_AXES))
     labels.append("body x, y, z axes (fit bold, truth faint)")
-    ax.legend(handles, labels, loc="upper left", fontsize=8.5, framealpha=0.9,
-              handler_map={tuple: HandlerTuple(ndivide=None)}, bbox_to_anchor=(0.03, 1.0))
+    ax.legend(
+        handles,
+        labels,
+        loc="upper left",
+        fontsize=8.5,
+        framealpha=0.9,
+        handler_map={tuple: HandlerTuple(ndivide=None)},
+        bbox_to_anchor=(0.03, 1.0),
+    )
 
     # -- Per-pose errors, position and rotation. -----------------------------------------
     idx = onp.arange(K)
     ax_pos = fig.add_subplot(gs_err[0])
     ax_rot = fig.add_subplot(gs_err[1], sharex=ax_pos)
-    for which, axe, scale, unit in ((0, ax_pos, 100.0, "position error [cm]"),
-                                    (1, ax_rot, 1.0, "rotation error [deg]")):
+    for which, axe, scale, unit in (
+        (0, ax_pos, 100.0, "position error [cm]"),
+        (1, ax_rot, 1.0, "rotation error [deg]"),
+    ):
         for i in idx[missing]:
             axe.axvspan(i - 0.5, i + 0.5, color=C_GAP, alpha=0.10, lw=0)
         e = {name: scale * err[which] for name, err in errors.items()}
         axe.plot(idx[observed], e["reports"][observed], ".", ms=4, color=C_OBS, label="report")
-        axe.plot(idx[missing], e["naive"][missing], "x", ms=4, color=C_NAIVE,
-                 label="missing: geodesic between the nearest reports")
+        axe.plot(
+            idx[missing],
+            e["naive"][missing],
+            "x",
+            ms=4,
+            color=C_NAIVE,
+            label="missing: geodesic between the nearest reports",
+        )
         axe.plot(idx, e["fit"], color=C_FIT, lw=1.5, label="fit")
         # Headroom above the largest error for the legend.
         axe.set_ylim(0, 1.45 * max(e["reports"][observed].max(), e["naive"][missing].max()))
@@ -352,8 +398,9 @@ def draw(path: Path, T_true: SE3, Z: SE3, T_fit: SE3, T_naive: SE3, observed: on
     ax_pos.tick_params(labelbottom=False)
     ax_rot.set_xlabel("pose index i   (shaded: report missing)")
     ax_pos.set_title("Error of each pose against the ground truth", fontsize=10)
-    ax_pos.legend(fontsize=8, ncol=3, loc="upper center", framealpha=0.9, handletextpad=0.3,
-                  columnspacing=1.2)
+    ax_pos.legend(
+        fontsize=8, ncol=3, loc="upper center", framealpha=0.9, handletextpad=0.3, columnspacing=1.2
+    )
 
     # -- Loss curves. ---------------------------------------------------------------------
     ax2 = fig.add_subplot(gs_right[1])
@@ -371,15 +418,28 @@ def draw(path: Path, T_true: SE3, Z: SE3, T_fit: SE3, T_naive: SE3, observed: on
     ax2.legend(fontsize=8, framealpha=0.9, ncol=2, loc="lower right")
     ax2.grid(True, which="major", lw=0.4, alpha=0.5)
 
-    pos = {label: 100 * rmse(errors[name][0][where]) for label, name, where in
-           (("reports", "reports", observed), ("fit_obs", "fit", observed),
-            ("naive", "naive", missing), ("fit_miss", "fit", missing))}
-    rot = {label: rmse(errors[name][1][where]) for label, name, where in
-           (("reports", "reports", observed), ("fit_obs", "fit", observed),
-            ("naive", "naive", missing), ("fit_miss", "fit", missing))}
+    pos = {
+        label: 100 * rmse(errors[name][0][where])
+        for label, name, where in (
+            ("reports", "reports", observed),
+            ("fit_obs", "fit", observed),
+            ("naive", "naive", missing),
+            ("fit_miss", "fit", missing),
+        )
+    }
+    rot = {
+        label: rmse(errors[name][1][where])
+        for label, name, where in (
+            ("reports", "reports", observed),
+            ("fit_obs", "fit", observed),
+            ("naive", "naive", missing),
+            ("fit_miss", "fit", missing),
+        )
+    }
     fig.suptitle(
         f"Fitting a smooth SE(3) trajectory to {K} noisy poses, {missing.sum()} of them missing "
-        r"(Adam on the tangent space, $T \leftarrow T\,\exp(\delta)$)" "\n"
+        r"(Adam on the tangent space, $T \leftarrow T\,\exp(\delta)$)"
+        "\n"
         f"RMSE at observed poses: reports {pos['reports']:.1f} cm, {rot['reports']:.1f}° → fit "
         f"{pos['fit_obs']:.1f} cm, {rot['fit_obs']:.1f}°;   at missing poses: geodesic gap "
         f"filling {pos['naive']:.1f} cm, {rot['naive']:.1f}° → fit {pos['fit_miss']:.1f} cm, "
@@ -419,26 +479,36 @@ def main(argv=None) -> None:
         Z_world_body=Z,
         observed=jnp.asarray(observed, dtype=jnp.float32),
         w_data=jnp.asarray([SIGMA_POS**-2] * 3 + [SIGMA_ROT**-2] * 3, dtype=jnp.float32),
-        w_smooth=args.lam * jnp.asarray([(scale * SIGMA_ACC_POS) ** -2] * 3
-                                        + [(scale * SIGMA_ACC_ROT) ** -2] * 3, dtype=jnp.float32),
+        w_smooth=args.lam
+        * jnp.asarray(
+            [(scale * SIGMA_ACC_POS) ** -2] * 3 + [(scale * SIGMA_ACC_ROT) ** -2] * 3,
+            dtype=jnp.float32,
+        ),
     )
-    print(f"{K} poses of a banked figure-eight; {int(observed.sum())} noisy reports "
-          f"(σ = {100 * SIGMA_POS:.0f} cm and {onp.rad2deg(SIGMA_ROT):.0f}° per axis), "
-          f"{int((~observed).sum())} missing ({100 * (~observed).mean():.0f}%)")
+    print(
+        f"{K} poses of a banked figure-eight; {int(observed.sum())} noisy reports "
+        f"(σ = {100 * SIGMA_POS:.0f} cm and {onp.rad2deg(SIGMA_ROT):.0f}° per axis), "
+        f"{int((~observed).sum())} missing ({100 * (~observed).mean():.0f}%)"
+    )
 
     # -- 2. Fit. Start from the reports, gaps filled by geodesic interpolation. ----------
     T_naive = fill_gaps(Z, observed)
-    T_fit, history, first_s, rest_s = fit(T_naive, problem, iters, args.lr,
-                                          progress=not args.quick)
+    T_fit, history, first_s, rest_s = fit(T_naive, problem, iters, args.lr, progress=not args.quick)
     loss_true = float(evaluate(T_true, problem)[0])
-    print(f"Adam on the tangent space, {iters} iterations: first call (tracing + compilation) "
-          f"{first_s:.1f} s, then {1e3 * rest_s / max(iters - 1, 1):.2f} ms/iteration")
-    print(f"  loss {history[0, 0]:.1f} -> {history[-1, 0]:.1f} (data {history[-1, 1]:.1f} + "
-          f"smoothness {history[-1, 2]:.1f}); the ground truth scores {loss_true:.1f}")
+    print(
+        f"Adam on the tangent space, {iters} iterations: first call (tracing + compilation) "
+        f"{first_s:.1f} s, then {1e3 * rest_s / max(iters - 1, 1):.2f} ms/iteration"
+    )
+    print(
+        f"  loss {history[0, 0]:.1f} -> {history[-1, 0]:.1f} (data {history[-1, 1]:.1f} + "
+        f"smoothness {history[-1, 2]:.1f}); the ground truth scores {loss_true:.1f}"
+    )
 
     # -- 3. How good is it? ----------------------------------------------------------------
-    e = {name: pose_errors(T, T_true) for name, T in
-         (("reports", Z), ("naive", T_naive), ("fit", T_fit))}
+    e = {
+        name: pose_errors(T, T_true)
+        for name, T in (("reports", Z), ("naive", T_naive), ("fit", T_fit))
+    }
     missing = ~observed
 
     def row(label: str, name: str, where: onp.ndarray) -> None:

@@ -295,7 +295,9 @@ class MatrixLieGroup(abc.ABC):
         iteration fallback relies on the error); jax arrays and traced indices clamp, as in
         JAX."""
         index = index if isinstance(index, tuple) else (index,)
-        index = tuple(bool(i) if isinstance(i, onp.bool_) else i for i in index)  # jnp fails on them
+        index = tuple(
+            bool(i) if isinstance(i, onp.bool_) else i for i in index
+        )  # jnp fails on them
         check_index(type(self).__name__, self.get_batch_axes(), index)
         # In the stored layout, the parameter axis last: NumPy's rules put the advanced
         # indices' axes first when they are not adjacent, which keeps that axis last.
@@ -346,8 +348,10 @@ class MatrixLieGroup(abc.ABC):
         rotation = getattr(type(self), "_rotation_type", None)
         if rotation is not None:  # SE: the rotation's field and the translation, jaxlie's labels
             k = rotation.parameters_dim
-            parts = [(dataclasses.fields(rotation)[0].name, v[..., :k]),
-                     (name.rsplit("_", 1)[1], v[..., k:])]
+            parts = [
+                (dataclasses.fields(rotation)[0].name, v[..., :k]),
+                (name.rsplit("_", 1)[1], v[..., k:]),
+            ]
         return f"{type(self).__name__}({', '.join(f'{n}={v}' for n, v in parts)})"
 
     # -- shared helpers -------------------------------------------------------------
@@ -374,8 +378,10 @@ class MatrixLieGroup(abc.ABC):
         where = where or f"{type(self).__name__}.apply"
         points = as_float_array(target, name, (self.space_dim,), where, like=self.parameters())
         check_batches(
-            where, "batch axes of the element and the points",
-            self.get_batch_axes(), points.shape[:-1],
+            where,
+            "batch axes of the element and the points",
+            self.get_batch_axes(),
+            points.shape[:-1],
         )
         return points
 
@@ -473,7 +479,10 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
             if names[0] == names[1]:  # e.g. jaxlie's SO3 passed to ours
                 names = (f"{R.__module__}.{R.__qualname__}", f"{got.__module__}.{got.__qualname__}")
             elif hasattr(rotation, "shape") and hasattr(rotation, "dtype"):
-                names = (names[0], f"an array of shape {tuple(rotation.shape)} (wrap it: {R.__name__}(...))")
+                names = (
+                    names[0],
+                    f"an array of shape {tuple(rotation.shape)} (wrap it: {R.__name__}(...))",
+                )
             raise TypeError(
                 f"{cls.__name__}.{where}: `rotation` must be {names[0]}, got {names[1]}."
             )
@@ -499,7 +508,9 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         r = rotation.parameters()
         dtype = jnp.result_type(r, t)
         where = f"{cls.__name__}.from_rotation_and_translation"
-        batch = check_batches(where, "rotation and translation batch axes", r.shape[:-1], t.shape[:-1])
+        batch = check_batches(
+            where, "rotation and translation batch axes", r.shape[:-1], t.shape[:-1]
+        )
         r = jnp.broadcast_to(r.astype(dtype), (*batch, r.shape[-1]))
         t = jnp.broadcast_to(t.astype(dtype), (*batch, t.shape[-1]))
         return cls(jnp.concatenate([r, t], axis=-1))
@@ -590,9 +601,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
             [jnp.broadcast_to(R, (*batch, n, n)), jnp.broadcast_to(t, (*batch, n))[..., None]],
             axis=-1,
         )
-        bottom = jnp.broadcast_to(
-            jnp.eye(n + 1, dtype=t.dtype)[n], (*batch, 1, n + 1)
-        )
+        bottom = jnp.broadcast_to(jnp.eye(n + 1, dtype=t.dtype)[n], (*batch, 1, n + 1))
         return jnp.concatenate([top, bottom], axis=-2)
 
     @classmethod
@@ -623,12 +632,8 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         Rm = R._matrix_block()
         batch = Rm.shape[:-2]
         n, kq = self.space_dim, Jq.shape[-2]
-        top = jnp.concatenate(
-            [jnp.zeros((*batch, kq, n), Rm.dtype), Jq], axis=-1
-        )
-        bottom = jnp.concatenate(
-            [Rm, jnp.zeros((*batch, n, Jq.shape[-1]), Rm.dtype)], axis=-1
-        )
+        top = jnp.concatenate([jnp.zeros((*batch, kq, n), Rm.dtype), Jq], axis=-1)
+        bottom = jnp.concatenate([Rm, jnp.zeros((*batch, n, Jq.shape[-1]), Rm.dtype)], axis=-1)
         return jnp.concatenate([top, bottom], axis=-2)
 
 

@@ -34,7 +34,9 @@ def _batch_may_be_sharded() -> bool:
     return mesh is None or mesh.empty or not set(mesh.axis_names) <= manual
 
 
-def _zeros_like_leaves(leaves: Sequence[jax.Array], shape: Tuple[int, ...], dtype: Any) -> jax.Array:
+def _zeros_like_leaves(
+    leaves: Sequence[jax.Array], shape: Tuple[int, ...], dtype: Any
+) -> jax.Array:
     """Zeros of ``shape`` and ``dtype`` that vary over every manual mesh axis some leaf
     varies over: inside ``shard_map`` a loop's carry keeps one type, and chunks computed
     from a device's own shard, written into a device-invariant zero buffer, failed to

@@ -135,8 +135,10 @@ def check_same_group(where: str, first: Any, *rest: Any) -> None:
             want, got = type(first), type(a)
             names = (want.__name__, got.__name__)
             if names[0] == names[1]:
-                names = (f"{want.__module__}.{want.__qualname__}",
-                         f"{got.__module__}.{got.__qualname__}")
+                names = (
+                    f"{want.__module__}.{want.__qualname__}",
+                    f"{got.__module__}.{got.__qualname__}",
+                )
             raise TypeError(f"{where}: expected {names[0]}, got {names[1]}.")
 
 

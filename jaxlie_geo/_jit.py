@@ -127,5 +127,3 @@ def jit_function(*static_argnames: str) -> Callable[[_F], _F]:
         return cast(_F, functools.wraps(fn)(lambda *args, **kwargs: jitted(*args, **kwargs)))
 
     return wrap
-
-

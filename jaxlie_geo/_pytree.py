@@ -75,8 +75,7 @@ def _setattr_if_mutable(self: Any, name: str, value: Any) -> None:
         old_leaves, old_def = jax.tree_util.tree_flatten(old)
         new_leaves, new_def = jax.tree_util.tree_flatten(new)
         same = bool(old_def == new_def) and all(  # type: ignore[operator]
-            onp.shape(a) == onp.shape(b)
-            and onp.result_type(a).kind == onp.result_type(b).kind
+            onp.shape(a) == onp.shape(b) and onp.result_type(a).kind == onp.result_type(b).kind
             for a, b in zip(old_leaves, new_leaves)
         )
         if not same:
@@ -121,5 +120,3 @@ def _register_flax_state(cls: type, names: Tuple[str, ...]) -> None:
         )
 
     ser.register_serialization_state(cls, to_state, from_state)
-
-

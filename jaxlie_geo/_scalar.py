@@ -106,23 +106,15 @@ _ATAN_X_MAX = (math.sqrt(2.0) - 1.0) ** 2 * (1 + 1e-6)  # tan²(π/8)
 
 _COEFFS: dict[str, tuple[float, ...]] = {
     "cos": tuple(float(Fraction((-1) ** k, math.factorial(2 * k))) for k in range(_N_MAX)),
-    "sinc": tuple(
-        float(Fraction((-1) ** k, math.factorial(2 * k + 1))) for k in range(_N_MAX)
-    ),
-    "F2": tuple(
-        float(Fraction((-1) ** k, math.factorial(2 * k + 3))) for k in range(_N_MAX)
-    ),
-    "C2": tuple(
-        float(Fraction((-1) ** k, math.factorial(2 * k + 4))) for k in range(_N_MAX)
-    ),
+    "sinc": tuple(float(Fraction((-1) ** k, math.factorial(2 * k + 1))) for k in range(_N_MAX)),
+    "F2": tuple(float(Fraction((-1) ** k, math.factorial(2 * k + 3))) for k in range(_N_MAX)),
+    "C2": tuple(float(Fraction((-1) ** k, math.factorial(2 * k + 4))) for k in range(_N_MAX)),
     "D": tuple(
-        float(Fraction((-1) ** k * (k + 1), math.factorial(2 * k + 5)))
-        for k in range(_N_MAX)
+        float(Fraction((-1) ** k * (k + 1), math.factorial(2 * k + 5))) for k in range(_N_MAX)
     ),
     # m = (sinc(θ/2) − cos(θ/2))/(2θ²) as a series in y = θ²/4: −d sinc(θ/2)/dθ².
     "half_m": tuple(
-        float(Fraction((-1) ** k * (k + 1), 4 * math.factorial(2 * k + 3)))
-        for k in range(_N_MAX)
+        float(Fraction((-1) ** k * (k + 1), 4 * math.factorial(2 * k + 3))) for k in range(_N_MAX)
     ),
     "atan": tuple(float(Fraction((-1) ** k, 2 * k + 1)) for k in range(_N_MAX)),
     "G": tuple(
@@ -310,9 +302,7 @@ def sinc(x: jax.Array, x_lo: Optional[jax.Array] = None) -> jax.Array:
     return _switched("sinc", x, 1.0, closed)
 
 
-def half_angle(
-    x: jax.Array, x_lo: Optional[jax.Array] = None
-) -> Tuple[jax.Array, jax.Array]:
+def half_angle(x: jax.Array, x_lo: Optional[jax.Array] = None) -> Tuple[jax.Array, jax.Array]:
     """c = cos(θ/2) and k = sin(θ/2)/(θ/2) for x = θ² (+ x_lo), from one sincos.
 
     Everything an SO(3)/SE(3) exponential needs follows: the quaternion (c, k ω/2), and

@@ -28,7 +28,6 @@ from ._so3 import (
 )
 from ._xla import materialize, matmul
 
-
 _FORMS = ("axis_split", "textbook")
 
 

@@ -75,9 +75,7 @@ class SO2(SOBase):
         cls, key: jax.Array, batch_axes: Tuple[int, ...] = (), dtype: Any = None
     ) -> SO2:
         dtype = resolve_dtype(dtype)
-        theta = jax.random.uniform(
-            key, batch_axes, dtype=dtype, minval=0.0, maxval=2.0 * jnp.pi
-        )
+        theta = jax.random.uniform(key, batch_axes, dtype=dtype, minval=0.0, maxval=2.0 * jnp.pi)
         return SO2.from_radians(theta)
 
     # -- Lie algebra ----------------------------------------------------------------

@@ -47,9 +47,7 @@ def exp_quaternion(
     return jnp.concatenate([c[..., None], (0.5 * k)[..., None] * omega], axis=-1)
 
 
-def exp_half_angle(
-    omega: jax.Array, compensated: bool = True
-) -> Tuple[jax.Array, jax.Array]:
+def exp_half_angle(omega: jax.Array, compensated: bool = True) -> Tuple[jax.Array, jax.Array]:
     """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖, each of shape ``batch`` for ω of ``(*batch, 3)``.
 
     With ``compensated``, θ² is summed as hi + lo so that angles far beyond π keep full
@@ -319,9 +317,7 @@ class SO3(SOBase):
         Returns:
             SO3 with that batch shape.
         """
-        return (
-            SO3.from_z_radians(yaw) @ SO3.from_y_radians(pitch) @ SO3.from_x_radians(roll)
-        )
+        return SO3.from_z_radians(yaw) @ SO3.from_y_radians(pitch) @ SO3.from_x_radians(roll)
 
     @staticmethod
     def from_quaternion_xyzw(xyzw: hints.Array) -> SO3:

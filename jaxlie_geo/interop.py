@@ -31,9 +31,7 @@ def _jaxlie_types() -> Dict[type, type]:
     try:  # optional: imported by name, so that type checkers need not find it
         jaxlie = importlib.import_module("jaxlie")
     except ImportError as e:  # pragma: no cover - the test extra installs jaxlie
-        raise ImportError(
-            "jaxlie_geo.interop needs jaxlie: pip install 'jaxlie==1.5.*'"
-        ) from e
+        raise ImportError("jaxlie_geo.interop needs jaxlie: pip install 'jaxlie==1.5.*'") from e
     return {G: getattr(jaxlie, G.__name__) for G in _OURS}
 
 

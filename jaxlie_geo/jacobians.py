@@ -139,8 +139,12 @@ def rplus(a: GroupT, delta: hints.Array) -> Tuple[jax.Array, jax.Array]:
     """
     G = type(a)
     delta = G._check_tangent(delta, "jacobians.rplus", like=a.parameters(), name="delta")
-    check_batches("jacobians.rplus", "batch axes of the element and `delta`",
-                  a.get_batch_axes(), delta.shape[:-1])
+    check_batches(
+        "jacobians.rplus",
+        "batch axes of the element and `delta`",
+        a.get_batch_axes(),
+        delta.shape[:-1],
+    )
     J_a, J_d = _broadcast(G.exp(-delta).adjoint(), G.jac_right(delta))
     J_a, _ = _broadcast(J_a, _eye_like(a))  # the element's batch axes broadcast too
     return _broadcast(J_a, J_d)

@@ -46,6 +46,7 @@ def rplus(transform: _PytreeT, delta: TangentPytree) -> _PytreeT:
     Returns:
         A pytree of ``transform``'s structure.
     """
+
     def plus(T: Any, d: Any) -> Any:
         d = T._check_tangent(d, "manifold.rplus", like=T.parameters(), name="delta")
         return T.multiply(type(T).exp(d))
@@ -98,9 +99,7 @@ def value_and_grad(
 
     def wrapped(*args: Any, **fkwargs: Any) -> Any:
         def tangent_fun(*deltas: Any, **kdeltas: Any) -> Any:
-            return fun(
-                *rplus(args, deltas), **{k: rplus(fkwargs[k], kdeltas[k]) for k in fkwargs}
-            )
+            return fun(*rplus(args, deltas), **{k: rplus(fkwargs[k], kdeltas[k]) for k in fkwargs})
 
         zeros = tuple(zero_tangents(a) for a in args)
         kzeros = {k: zero_tangents(v) for k, v in fkwargs.items()}

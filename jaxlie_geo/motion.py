@@ -59,8 +59,12 @@ def velocity_between(start: GroupT, end: GroupT, duration: hints.Scalar) -> jax.
     if not isinstance(duration, jax.core.Tracer) and bool(jnp.any(duration == 0)):
         raise ValueError("velocity_between: `duration` must be non-zero.")
     tangent = start._between(end).log()
-    check_batches("velocity_between", "batch axes of the poses and `duration`",
-                  tangent.shape[:-1], duration.shape)
+    check_batches(
+        "velocity_between",
+        "batch axes of the poses and `duration`",
+        tangent.shape[:-1],
+        duration.shape,
+    )
     tangent, duration = aligned(tangent, duration[..., None].astype(tangent.dtype))
     return tangent / duration
 
