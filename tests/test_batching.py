@@ -211,14 +211,14 @@ def test_batch_axes_broadcast_between_operands(G, dtype, seed):
 def small_chunks(monkeypatch):
     """``in_chunks`` with 256-element chunks from 512 elements on, so that a test-sized
     batch takes the chunked path, with chunks large enough for ``_so3.by_angle`` to choose
-    its kernel per chunk (jit caches cleared: the sizes are read at trace time)."""
+    its kernel per chunk. The sizes are read at trace time: the tests that use this fixture
+    use batch shapes no other test traces, so no cached trace predates the change (and the
+    jit caches, which every later test on this worker reuses, are not cleared)."""
     assert _so3._BY_ANGLE_MIN_BATCH <= 256
     monkeypatch.setattr(_batch, "CHUNK", 256)
     monkeypatch.setattr(_batch, "CHUNKED_FROM", 512)
-    jax.clear_caches()
     yield
     monkeypatch.undo()
-    jax.clear_caches()
 
 
 def _chunked_ops():
@@ -255,10 +255,12 @@ def test_in_chunks_equals_whole_batch(G, op, f, dtype, small_chunks):
     assert "while" not in jax.jit(jax.grad(loss)).lower(*args).as_text()
     got, grads = f(*args), jax.grad(loss, argnums=(0, 1, 2))(*args)
     stacked = jax.vmap(f)(*(jnp.stack([a, a[::-1]]) for a in args))
-    _batch.CHUNKED_FROM = 2**19
-    jax.clear_caches()
-    assert "while" not in jax.jit(f).lower(*args).as_text()
-    want, want_grads = f(*args), jax.grad(loss, argnums=(0, 1, 2))(*args)
+    # The whole-batch path: f mapped over the 7 rows, each of 143 elements, below
+    # CHUNKED_FROM (under vmap the decision sees the per-example batch).
+    whole = jax.vmap(f)
+    assert "while" not in jax.jit(whole).lower(*args).as_text()
+    want = whole(*args)
+    want_grads = jax.grad(lambda *a: jnp.sum(jnp.sin(whole(*a))), argnums=(0, 1, 2))(*args)
     assert_close(got, want, dtype, 4)
     for g, w in zip(grads, want_grads):
         assert_close(g, w, dtype, 16)
