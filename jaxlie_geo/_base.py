@@ -44,7 +44,7 @@ from typing_extensions import Self, final
 
 from . import hints
 from ._batch import in_chunks
-from ._checks import as_float_array, check_batches, check_index, resolve_dtype
+from ._checks import as_float_array, check_batches, check_index, check_type, resolve_dtype
 from ._jit import jit_public_methods
 from ._xla import aligned, materialize, matmul_unrolled
 
@@ -471,23 +471,6 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
     # -- SE-specific interface ------------------------------------------------------
 
     @classmethod
-    def _check_rotation(cls, rotation: Any, where: str) -> None:
-        R = cls._rotation_type
-        if not isinstance(rotation, R):
-            got = type(rotation)
-            names = (R.__name__, got.__name__)
-            if names[0] == names[1]:  # e.g. jaxlie's SO3 passed to ours
-                names = (f"{R.__module__}.{R.__qualname__}", f"{got.__module__}.{got.__qualname__}")
-            elif hasattr(rotation, "shape") and hasattr(rotation, "dtype"):
-                names = (
-                    names[0],
-                    f"an array of shape {tuple(rotation.shape)} (wrap it: {R.__name__}(...))",
-                )
-            raise TypeError(
-                f"{cls.__name__}.{where}: `rotation` must be {names[0]}, got {names[1]}."
-            )
-
-    @classmethod
     def from_rotation_and_translation(
         cls, rotation: ContainedSOType, translation: hints.Array
     ) -> Self:
@@ -497,7 +480,12 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
             rotation: an element of the matching SO group.
             translation: shape ``(*batch, space_dim)``.
         """
-        cls._check_rotation(rotation, "from_rotation_and_translation")
+        check_type(
+            f"{cls.__name__}.from_rotation_and_translation",
+            "rotation",
+            rotation,
+            cls._rotation_type,
+        )
         t = as_float_array(
             translation,
             "translation",
@@ -518,7 +506,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
     @classmethod
     def from_rotation(cls, rotation: ContainedSOType) -> Self:
         """Pure rotation (zero translation), with the rotation's batch axes."""
-        cls._check_rotation(rotation, "from_rotation")
+        check_type(f"{cls.__name__}.from_rotation", "rotation", rotation, cls._rotation_type)
         p = rotation.parameters()
         return cls.from_rotation_and_translation(
             rotation, jnp.zeros((*p.shape[:-1], cls.space_dim), p.dtype)

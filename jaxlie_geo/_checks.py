@@ -127,19 +127,32 @@ def check_elements(where: str, *args: Any) -> None:
     check_batches(where, "batch axes", *batches)
 
 
+def _type_names(want: type, got: type) -> Tuple[str, str]:
+    """The two classes' names, module-qualified where the short names agree (jaxlie's
+    ``SO3`` passed where jaxlie_geo's is expected)."""
+    if want.__name__ != got.__name__:
+        return want.__name__, got.__name__
+    return f"{want.__module__}.{want.__qualname__}", f"{got.__module__}.{got.__qualname__}"
+
+
 def check_same_group(where: str, first: Any, *rest: Any) -> None:
     """``TypeError`` naming ``where`` when an element among ``rest`` is not of ``first``'s
-    group (module-qualified names where the short names agree, e.g. jaxlie's ``SO3``)."""
+    group."""
     for a in rest:
         if is_element(a) and type(a) is not type(first):
-            want, got = type(first), type(a)
-            names = (want.__name__, got.__name__)
-            if names[0] == names[1]:
-                names = (
-                    f"{want.__module__}.{want.__qualname__}",
-                    f"{got.__module__}.{got.__qualname__}",
-                )
-            raise TypeError(f"{where}: expected {names[0]}, got {names[1]}.")
+            want, got = _type_names(type(first), type(a))
+            raise TypeError(f"{where}: expected {want}, got {got}.")
+
+
+def check_type(where: str, name: str, value: Any, expected: type) -> None:
+    """``TypeError`` naming ``where`` and the argument ``name`` when ``value`` is not an
+    instance of ``expected``; an array is told to be wrapped in ``expected``."""
+    if isinstance(value, expected):
+        return
+    want, got = _type_names(expected, type(value))
+    if want == expected.__name__ and hasattr(value, "shape") and hasattr(value, "dtype"):
+        got = f"an array of shape {tuple(value.shape)} (wrap it: {expected.__name__}(...))"
+    raise TypeError(f"{where}: `{name}` must be {want}, got {got}.")
 
 
 def check_index(name: str, batch: Tuple[Any, ...], index: Tuple[Any, ...]) -> None:
