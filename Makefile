@@ -33,7 +33,7 @@ lint: $(VENV)/.installed-test
 
 # One pytest worker per core (pytest-xdist), at most 8: each is a process with its own jax
 # and compile caches; compilation dominates the suite. The workers share JAX's persistent
-# compilation cache in out/jax-cache (tests/conftest.py), so a second run is about 3x faster.
+# compilation cache in out/jax-cache (tests/conftest.py), kept for the next run.
 test: lint
 	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
