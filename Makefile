@@ -33,7 +33,8 @@ lint: $(VENV)/.installed-test
 
 # One pytest worker per core (pytest-xdist), at most 8: each is a process with its own jax
 # and compile caches; compilation dominates the suite. The workers share JAX's persistent
-# compilation cache in out/jax-cache (tests/conftest.py), kept for the next run.
+# compilation cache in out/jax-cache (tests/conftest.py), kept for the next run: on 2
+# cores a second run of the suite took 228 s against 629-644 s from a fresh clone.
 test: lint
 	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
