@@ -425,18 +425,22 @@ def _speed_table(data: dict) -> list:
             "",
         ]
         header = ["op", "arguments", "output", "temporaries: jaxlie_geo", "temporaries: jaxlie"]
-        body = [
-            [
-                r["op"],
-                f"{r['geo_args_mb']:.0f}",
-                f"{r['geo_out_mb']:.0f}",
-                f"{r['geo_temp_mb']:.1f}",
-                f"{r['ref_temp_mb']:.1f}",
-            ]
-            for r in memory
-        ]
-        lines += table(header, body, "lrrrr") + [""]
+        lines += table(header, memory_rows(memory), "lrrrr") + [""]
     return lines
+
+
+def memory_rows(memory: list) -> list:
+    """The memory table's rows: op, arguments, output and both libraries' temporaries (MB)."""
+    return [
+        [
+            r["op"],
+            f"{r['geo_args_mb']:.0f}",
+            f"{r['geo_out_mb']:.0f}",
+            f"{r['geo_temp_mb']:.1f}",
+            f"{r['ref_temp_mb']:.1f}",
+        ]
+        for r in memory
+    ]
 
 
 def _speed_notes(data: dict) -> list:

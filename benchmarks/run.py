@@ -49,7 +49,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from report import add_save_arguments, fmt_n, fmt_ns, geomean, save
+from report import add_save_arguments, fmt_n, fmt_ns, geomean, memory_rows, save
 
 # Benchmark the checkout's jaxlie_geo (works with or without an install, and with a stale
 # editable install that predates jaxlie_geo/__init__.py).
@@ -732,16 +732,7 @@ def main(argv=None):
         print(
             render_simple(
                 ["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
-                [
-                    [
-                        r["op"],
-                        f"{r['geo_args_mb']:.0f}",
-                        f"{r['geo_out_mb']:.0f}",
-                        f"{r['geo_temp_mb']:.1f}",
-                        f"{r['ref_temp_mb']:.1f}",
-                    ]
-                    for r in memory
-                ],
+                memory_rows(memory),
                 args.markdown,
             )
         )
