@@ -25,6 +25,7 @@ from ._se2 import SE2 as SE2
 from ._se3 import SE3 as SE3
 from ._so2 import SO2 as SO2
 from ._so3 import SO3 as SO3
+from ._validity import check_valid as check_valid
 
 try:
     __version__ = _version("jaxlie_geo")
@@ -43,6 +44,7 @@ __all__ = [
     "geodesic",
     "between",
     "stack",
+    "check_valid",
     "hints",
     "interop",
     "jacobians",

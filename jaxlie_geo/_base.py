@@ -14,7 +14,8 @@ Conventions used throughout the package:
   adapted.
 * Constructors never validate (JAX rebuilds pytrees with non-array leaves); factories and
   operations do, at trace time, raising ``ValueError`` that names the expected and the
-  received shape (``_checks``).
+  received shape (``_checks``). The values (finite, a unit rotation part) are checked on
+  request, at run time: ``is_valid``, and ``check_valid`` through checkify.
 """
 
 from __future__ import annotations
@@ -44,7 +45,14 @@ from typing_extensions import Self, final
 
 from . import hints
 from ._batch import in_chunks
-from ._checks import as_float_array, check_batches, check_index, check_type, resolve_dtype
+from ._checks import (
+    as_float_array,
+    check_batches,
+    check_index,
+    check_type,
+    default_float,
+    resolve_dtype,
+)
 from ._jit import jit_public_methods
 from ._xla import aligned, materialize, matmul_unrolled
 
@@ -182,6 +190,59 @@ class MatrixLieGroup(abc.ABC):
         rotation part divided by its norm (unit quaternion / complex), the translation
         kept. Any finite nonzero rotation part works, whatever its scale
         (``_scalar.unit``); a zero or non-finite one has no direction and gives NaN."""
+
+    def is_valid(self, atol: Optional[hints.Scalar] = None) -> jax.Array:
+        """Whether each element is a group element: all its parameters are finite and its
+        rotation part (the unit complex number of SO2/SE2, the unit quaternion of SO3/SE3)
+        has a norm within ``atol`` of 1. Constructors do not check this; use it (or
+        ``check_valid`` under ``jax.experimental.checkify``) on parameters that come from
+        outside the group operations: an optimiser's additive update, a file, a cast.
+
+        Runs under ``jit``, ``vmap`` and ``grad`` (the result is boolean and carries no
+        derivative), for any batch axes and floating dtype.
+
+        Args:
+            atol: tolerance on | ‖rotation part‖ − 1 |, ≥ 0: a scalar, or an array that
+                broadcasts against the batch axes. Default √ε of the parameters' dtype:
+                float32 3.5e-4, float64 1.5e-8, float16 3.1e-2, bfloat16 8.8e-2. Each
+                composition moves the norm by about an ulp, as a random walk (measured
+                on 64 chains of 10⁴ Haar-random SO3 and SO2 elements composed without
+                ``normalize``, float32 and float64: at most 8.5 ε after 10², 26 ε after
+                10³, 96 ε after 10⁴), so √ε (2900 ε in float32) accepts the chains a
+                program runs, while parameters that were never normalized or were
+                mis-scaled are off by far more. jaxlie's ``utils.get_epsilon`` (1e-5,
+                1e-10) would be stricter: 84 ε in float32, which 10⁴ compositions reach.
+                A float32 element cast to float64 can be off by about 1e-7, not valid at
+                float64's default: ``normalize()`` it after the cast.
+
+        Returns:
+            Boolean array of shape ``broadcast(batch, atol.shape)``: the batch shape for a
+            scalar ``atol``.
+        """
+        p = self.parameters()
+        u = self._unit_part()
+        if not jnp.issubdtype(p.dtype, jnp.floating):  # integers: the default float
+            p, u = p.astype(default_float()), u.astype(default_float())
+        if atol is None:
+            tol = jnp.asarray(valid_atol(p.dtype), p.dtype)
+        else:
+            where = f"{type(self).__name__}.is_valid"
+            tol = as_float_array(atol, "atol", (), where, like=p).astype(p.dtype)
+        # |‖u‖ − 1| ≤ atol as bounds on ‖u‖², with no square root: NaN fails both
+        # comparisons, an overflowing ‖u‖² (inf) the upper one.
+        n2 = jnp.sum(jnp.square(u), axis=-1)
+        low = jnp.square(jnp.maximum(1 - tol, 0))
+        high = jnp.square(1 + tol)
+        return (n2 >= low) & (n2 <= high) & jnp.all(jnp.isfinite(p), axis=-1)
+
+    def _unit_part(self) -> jax.Array:
+        """The parameters that hold a unit rotation (complex number or quaternion),
+        ``(*batch, k)``: all of them for a rotation group, the leading ones for an SE
+        group. Groups outside ``SOBase`` and ``SEBase`` override it."""
+        raise NotImplementedError(
+            f"{type(self).__name__}: is_valid needs _unit_part, the parameters that hold "
+            "the unit rotation."
+        )
 
     def jlog(self) -> jax.Array:
         """Jacobian of the log under right perturbations, the inverse right Jacobian at
@@ -454,6 +515,9 @@ class SOBase(MatrixLieGroup):
     def _linear_part(self) -> jax.Array:
         return self._matrix_block()
 
+    def _unit_part(self) -> jax.Array:
+        return self.parameters()
+
 
 ContainedSOType = TypeVar("ContainedSOType", bound=SOBase)
 GroupT = TypeVar("GroupT", bound=MatrixLieGroup)
@@ -523,6 +587,9 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
 
     def _linear_part(self) -> jax.Array:
         return self.rotation()._matrix_block()
+
+    def _unit_part(self) -> jax.Array:
+        return self.rotation()._unit_part()
 
     def rotation(self) -> ContainedSOType:
         """The rotation part (SO2 / SO3), same batch axes."""
@@ -623,6 +690,12 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         top = jnp.concatenate([jnp.zeros((*batch, kq, n), Rm.dtype), Jq], axis=-1)
         bottom = jnp.concatenate([Rm, jnp.zeros((*batch, n, Jq.shape[-1]), Rm.dtype)], axis=-1)
         return jnp.concatenate([top, bottom], axis=-2)
+
+
+def valid_atol(dtype: Any) -> float:
+    """``is_valid``'s default tolerance on | ‖rotation part‖ − 1 |: √ε of ``dtype``
+    (float32 3.5e-4, float64 1.5e-8, float16 3.1e-2, bfloat16 8.8e-2)."""
+    return float(onp.sqrt(float(jnp.finfo(dtype).eps)))
 
 
 def _interpolate(a: GroupT, b: GroupT, t: Any) -> GroupT:
