@@ -74,8 +74,13 @@ class MatrixLieGroup(abc.ABC):
     """Dimension k of the tangent space (the Lie algebra)."""
     space_dim: ClassVar[int]
     """Dimension of the points the group acts on."""
-    _interpolate_in_chunks: ClassVar[bool] = True
-    """Whether large ``interpolate`` batches run in chunks (``_batch.in_chunks``)."""
+    # How ``interpolate`` is scheduled on large batches; each is set only where it measured
+    # ≥ 1.3x faster at 10⁶ elements (docs/design/memory-and-chunks.md).
+    _interpolate_in_chunks: ClassVar[bool] = False
+    """Whether large ``interpolate`` batches run in chunks on CPU (``_batch.in_chunks``)."""
+    _interpolate_materializes: ClassVar[bool] = False
+    """Whether ``interpolate`` computes its log and exp into memory before the next kernel
+    reads them (``_xla.materialize``)."""
 
     # -- construction ---------------------------------------------------------------
 
@@ -344,8 +349,15 @@ class MatrixLieGroup(abc.ABC):
         t = as_float_array(t, "t", (), where, like=tangent)
         batch = check_batches(where, "batch axes of the path and of t", tangent.shape[:-1], t.shape)
         t = jnp.broadcast_to(t.astype(jnp.result_type(t, tangent)), batch)
-        t, tangent = aligned(t[..., None], tangent)
-        return self.multiply(G.exp(t * tangent))
+        t, tangent = aligned(t[..., None], self._in_memory(tangent))
+        return self.multiply(self._in_memory(G.exp(t * tangent)))
+
+    def _in_memory(self, x: Any) -> Any:
+        """``x`` computed once into memory (``_xla.materialize``) where the group sets
+        ``_interpolate_materializes``, else ``x``. The quaternion kernels read every input
+        component several times, and without the barrier XLA:CPU recomputes a producer
+        such as log's arctangent or exp's sincos per read."""
+        return materialize(x) if self._interpolate_materializes else x
 
     # -- batch handling -------------------------------------------------------------
 
@@ -488,24 +500,25 @@ class MatrixLieGroup(abc.ABC):
 class SOBase(MatrixLieGroup):
     """Base class for special orthogonal groups."""
 
-    # Barrier-free kernels of ``apply`` and ``multiply``, for the SE groups, which
-    # materialize whole elements once and pass the rotation in as a slice: a second
-    # barrier on that slice would copy it (jax ≥ 0.11 XLA:CPU materializes a barrier on a
-    # slice as a new buffer: 185 MB of temporaries for a 2^22-element SE3 compose). SO2
-    # and SO3 override them; the defaults keep other subclasses working.
+    # ``apply`` and ``multiply`` check and align their inputs, then call the group's
+    # kernels, which the SE groups also call on the rotation part of their elements.
 
-    _kernels_reread: ClassVar[bool] = True
-    """Whether the kernels read each input component several times (SO3's rotation and
-    Hamilton product), so that a computed input is best materialized first; SO2's read
-    each twice and are faster without (``docs/design/memory-and-chunks.md``)."""
+    def apply(self, target: hints.Array) -> jax.Array:
+        R, p = aligned(self, self._check_points(target))
+        return R._apply_kernel(p)
 
+    def multiply(self, other: Self) -> Self:
+        a, b = aligned(self, other)
+        return a._multiply_kernel(b)
+
+    @abc.abstractmethod
     def _apply_kernel(self, points: jax.Array) -> jax.Array:
-        """``apply`` on checked points, with no ``materialize``."""
-        return self.apply(points)
+        """The rotated points, ``(*batch, space_dim)``, for checked points whose batch axes
+        have the element's rank."""
 
+    @abc.abstractmethod
     def _multiply_kernel(self, other: Self) -> Self:
-        """``multiply`` with no ``materialize``."""
-        return self.multiply(other)
+        """``self @ other`` for an element of the same batch rank."""
 
     def _matrix_block(self) -> jax.Array:
         """``as_matrix`` in the form that fuses best into a larger matrix (an SE group's
@@ -608,15 +621,12 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         rot = cls._rotation_type.identity(batch_axes, dtype)
         return cls.from_rotation(rot)
 
-    # Each operation materializes whole elements once, then uses the rotation's
-    # barrier-free kernels on slices of them (see ``SOBase._apply_kernel``).
-
     def apply(self, target: hints.Array) -> jax.Array:
-        T, target = materialize(*aligned(self, self._check_points(target)))
+        T, target = aligned(self, self._check_points(target))
         return T.rotation()._apply_kernel(target) + T.translation()
 
     def multiply(self, other: Self) -> Self:
-        a, b = materialize(*aligned(self, other))
+        a, b = aligned(self, other)
         R = a.rotation()
         return type(self).from_rotation_and_translation(
             R._multiply_kernel(b.rotation()), R._apply_kernel(b.translation()) + a.translation()
@@ -628,7 +638,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         R_a⁻¹t_b and cancels ε·|t_a| (float32 poses 2·10⁴ from the origin, 0.5 apart:
         the residual was off by 1e-3, 10⁴ ulp against mpmath; now ≤ 1.5 ulp). One rotation
         of a point instead of two."""
-        a, b = materialize(*aligned(self, other))
+        a, b = aligned(self, other)
         R_inv = a.rotation().inverse()
         return type(self).from_rotation_and_translation(
             R_inv._multiply_kernel(b.rotation()),
@@ -636,10 +646,9 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         )
 
     def inverse(self) -> Self:
-        T = materialize(self) if self._rotation_type._kernels_reread else self
-        R_inv = T.rotation().inverse()
+        R_inv = self.rotation().inverse()
         return type(self).from_rotation_and_translation(
-            R_inv, -R_inv._apply_kernel(T.translation())
+            R_inv, -R_inv._apply_kernel(self.translation())
         )
 
     def normalize(self) -> Self:
@@ -700,7 +709,7 @@ def valid_atol(dtype: Any) -> float:
 
 def _interpolate(a: GroupT, b: GroupT, t: Any) -> GroupT:
     """``a @ exp(t · log(a⁻¹ @ b))``: ``interpolate``'s body, element by element."""
-    return a._along(a._between(b).log(), t)
+    return a._along(a._in_memory(a._between(b)).log(), t)
 
 
 def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:

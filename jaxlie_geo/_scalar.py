@@ -168,40 +168,7 @@ def _switched(
 
 
 # ---------------------------------------------------------------------------------
-# Error-free transformations (Dekker 1971; Ogita, Rump, Oishi 2005), for angles beyond π.
-
-
-def _split(a: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """Dekker's split a = hi + lo, each half the mantissa (exact without FMA). The splitter
-    is 2^⌈p/2⌉ + 1 for a p-bit significand: 12 bits for float32, 27 for float64, 6 for
-    float16, 4 for bfloat16 (a fixed 2^27 + 1 would overflow float16 to inf, and the sums
-    built on it to NaN)."""
-    bits = (jnp.finfo(a.dtype).nmant + 2) // 2
-    c = (2.0**bits + 1.0) * a
-    hi = c - (c - a)
-    return hi, a - hi
-
-
-def _two_square(a: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """a² = p + e exactly."""
-    p = a * a
-    hi, lo = _split(a)
-    return p, ((hi * hi - p) + 2.0 * (hi * lo)) + lo * lo
-
-
-def _two_prod(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """a·b = p + e exactly (Dekker)."""
-    p = a * b
-    ah, al = _split(a)
-    bh, bl = _split(b)
-    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
-
-
-def _two_sum(a: jax.Array, b: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """a + b = s + e exactly."""
-    s = a + b
-    bb = s - a
-    return s, (a - (s - bb)) + (b - bb)
+# Vector helpers.
 
 
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -218,129 +185,48 @@ def sq_norm(w: jax.Array) -> jax.Array:
     return dot(w, w)
 
 
-@jax.custom_jvp
-def sq_norm_compensated(w: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """‖w‖² over the last axis as hi + lo with |lo| ≤ ulp(hi): about twice the working
-    precision (compensated sum of exact squares). Differentiated as the plain ‖w‖²
-    (d hi = 2 w·dw, d lo = 0): the low part only refines the value, and differentiating
-    the error-free transformations would only add work."""
-    p, err = _two_square(w[..., 0])
-    for i in range(1, w.shape[-1]):
-        q, e = _two_square(w[..., i])
-        p, f = _two_sum(p, q)
-        err = err + (e + f)
-    return _two_sum(p, err)
-
-
-@jax.custom_jvp
-def dot_compensated(a: jax.Array, b: jax.Array) -> jax.Array:
-    """a·b over the last axis as if computed in twice the working precision, then rounded
-    (Dot2 of Ogita, Rump & Oishi 2005). Needed where the dot cancels and the result is
-    multiplied into a much shorter vector: the SE(3) exp near θ = 2πk with v ⟂ ω (190 ulp
-    with a plain dot). Differentiated as the plain dot."""
-    p, err = _two_prod(a[..., 0], b[..., 0])
-    for i in range(1, a.shape[-1]):
-        q, e = _two_prod(a[..., i], b[..., i])
-        p, f = _two_sum(p, q)
-        err = err + (e + f)
-    return p + err
-
-
-@dot_compensated.defjvp
-def _dot_compensated_jvp(primals, tangents):  # type: ignore[no-untyped-def]
-    (a, b), (da, db) = primals, tangents
-    return dot_compensated(a, b), jnp.sum(da * b + a * db, axis=-1)
-
-
-@sq_norm_compensated.defjvp
-def _sq_norm_compensated_jvp(primals, tangents):  # type: ignore[no-untyped-def]
-    (w,), (dw,) = primals, tangents
-    hi, lo = sq_norm_compensated(w)
-    d = 2.0 * jnp.sum(w * dw, axis=-1)
-    return (hi, lo), (d, jnp.zeros_like(lo))
-
-
-def _sqrt_with_residual(x: jax.Array, x_lo: jax.Array) -> Tuple[jax.Array, jax.Array]:
-    """θ₀ = fl(√x) and δ with √(x + x_lo) ≈ θ₀ + δ to about twice the working precision.
-    δ ~ ε θ is a constant for differentiation (its derivative is O(ε) relative)."""
-    theta = jnp.sqrt(x)
-    p, e = _two_square(theta)
-    return theta, jax.lax.stop_gradient((((x - p) - e) + x_lo) / (2.0 * theta))
-
-
 # ---------------------------------------------------------------------------------
 # Kernels. All take x = θ² >= 0 (any shape, floating dtype) and return x's dtype.
-# cos_ and sinc also take x_lo, the low part of a compensated θ² (see exp_quaternion):
-# beyond π, forming θ from a rounded θ² costs up to θ·eps absolute in cos θ (5 ulp
-# measured at θ ≈ 16); the closed-form branch then corrects to first order in δθ.
+# θ = √x carries the rounding of x: about |θ|·ε/2 absolute, so an angle far beyond π
+# is only as accurate as its square (the conditioning bound in ``half_angle``).
 
 
-def cos_(x: jax.Array, x_lo: Optional[jax.Array] = None) -> jax.Array:
-    """cos θ as a function of x = θ² (+ x_lo). Series below x = 1."""
-
-    def closed(x: jax.Array) -> jax.Array:
-        if x_lo is None:
-            return jnp.cos(jnp.sqrt(x))
-        theta, d = _sqrt_with_residual(x, x_lo)
-        return jnp.cos(theta) - jnp.sin(theta) * d
-
-    return _switched("cos", x, 1.0, closed)
+def cos_(x: jax.Array) -> jax.Array:
+    """cos θ as a function of x = θ². Series below x = 1."""
+    return _switched("cos", x, 1.0, lambda x: jnp.cos(jnp.sqrt(x)))
 
 
-def sinc(x: jax.Array, x_lo: Optional[jax.Array] = None) -> jax.Array:
-    """F0 = sin θ / θ as a function of x = θ² (+ x_lo) (Eberly 2024, §11.1). Series below
-    x = 1."""
+def sinc(x: jax.Array) -> jax.Array:
+    """F0 = sin θ / θ as a function of x = θ² (Eberly 2024, §11.1). Series below x = 1."""
 
     def closed(x: jax.Array) -> jax.Array:
-        if x_lo is None:
-            theta = jnp.sqrt(x)
-            return jnp.sin(theta) / theta
-        theta, d = _sqrt_with_residual(x, x_lo)
-        s = jnp.sin(theta)
-        return (s + d * (jnp.cos(theta) - s / theta)) / theta
+        theta = jnp.sqrt(x)
+        return jnp.sin(theta) / theta
 
     return _switched("sinc", x, 1.0, closed)
 
 
-def half_angle(x: jax.Array, x_lo: Optional[jax.Array] = None) -> Tuple[jax.Array, jax.Array]:
-    """c = cos(θ/2) and k = sin(θ/2)/(θ/2) for x = θ² (+ x_lo), from one sincos.
+@jax.custom_jvp
+def half_angle(x: jax.Array) -> Tuple[jax.Array, jax.Array]:
+    """c = cos(θ/2) and k = sin(θ/2)/(θ/2) for x = θ², from one sincos.
 
     Everything an SO(3)/SE(3) exponential needs follows: the quaternion (c, k ω/2), and
     F0 = c k, F1 = k²/2, F2 = (1 − c k)/θ² above its switch.
 
     Values: the closed forms, which need no series for accuracy (cos is well conditioned,
     and sin(θ/2)/(θ/2) does not cancel), except x/4 < eps where c = 1 − x/8, k = 1 − x/24
-    are exact and no 0/0 arises. Without ``x_lo`` θ comes from the rounded θ², which costs
-    ~θ·eps in the angle: fine up to θ² = ``HALF_ANGLE_PLAIN_MAX``, 5 ulp at θ ≈ 16. With
-    ``x_lo`` (a compensated θ² = x + x_lo), the first-order correction of
-    ``_sqrt_with_residual`` keeps every angle exact (``_so3.by_angle`` picks per batch).
+    are exact and no 0/0 arises. θ/2 = √(x/4) carries the rounding of x = θ², at most
+    about ¾·|θ|·ε/2 in the half angle: within 4 ulp up to θ = π and, beyond, within
+    (4 + |θ|/2) ulp, the error a one-ulp change of the input ω itself causes (5 ulp
+    measured at θ ≈ 16, 1.2e3 at θ = 1e4 in float32).
 
     Derivatives (custom JVP, exact in terms of the outputs): dc/dx = −k/8 and
     dk/dx = −m with m = (k − c)/(2x), summed from its series below x = 4 where that
     difference cancels. The JVP rule is itself differentiable (Hessians)."""
-    if x_lo is None:
-        return _half_angle(x, jnp.zeros_like(x), False)
-    return _half_angle(x, x_lo, True)
-
-
-HALF_ANGLE_PLAIN_MAX = 10.0
-"""θ² up to which ``half_angle`` needs no compensated θ²: θ ≤ √10, past π, so that every
-principal log's angle, rounded up, qualifies; the rounded θ² then costs ≤ 1.5·eps·θ/2 in
-cos(θ/2), under 2.4 ulp."""
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
-def _half_angle(x: jax.Array, x_lo: jax.Array, compensated: bool) -> Tuple[jax.Array, jax.Array]:
     x4 = 0.25 * x
     tiny = x4 < jnp.finfo(x.dtype).eps
-    xd = jnp.where(tiny, 1.0, x4)
-    if compensated:
-        phi, d = _sqrt_with_residual(xd, jnp.where(tiny, 0.0, 0.25 * x_lo))
-        sn, cs = jnp.sin(phi), jnp.cos(phi)
-        c, k = cs - sn * d, (sn + d * (cs - sn / phi)) / phi
-    else:
-        phi = jnp.sqrt(xd)
-        c, k = jnp.cos(phi), jnp.sin(phi) / phi
+    phi = jnp.sqrt(jnp.where(tiny, 1.0, x4))
+    c, k = jnp.cos(phi), jnp.sin(phi) / phi
     return jnp.where(tiny, 1.0 - 0.5 * x4, c), jnp.where(tiny, 1.0 - x4 / 6.0, k)
 
 
@@ -354,10 +240,10 @@ def _half_m(x: jax.Array, c: jax.Array, k: jax.Array) -> jax.Array:
     return jnp.where(small, m_series, m_closed)
 
 
-@_half_angle.defjvp
-def _half_angle_jvp(compensated, primals, tangents):  # type: ignore[no-untyped-def]
-    (x, x_lo), (dx, _) = primals, tangents
-    c, k = _half_angle(x, x_lo, compensated)
+@half_angle.defjvp
+def _half_angle_jvp(primals, tangents):  # type: ignore[no-untyped-def]
+    (x,), (dx,) = primals, tangents
+    c, k = half_angle(x)
     return (c, k), (-0.125 * k * dx, -_half_m(x, c, k) * dx)
 
 

@@ -10,13 +10,11 @@ from typing_extensions import override
 
 from . import _scalar, hints
 from ._base import SEBase
-from ._batch import in_chunks
 from ._checks import as_float_array
 from ._pytree import pytree_dataclass
 from ._scalar import dot, sq_norm
 from ._so3 import (
     SO3,
-    by_angle,
     cross,
     exp_half_angle,
     exp_quaternion,
@@ -26,7 +24,7 @@ from ._so3 import (
     skew,
     skew_sq,
 )
-from ._xla import materialize, matmul
+from ._xla import matmul
 
 _FORMS = ("axis_split", "textbook")
 
@@ -41,7 +39,6 @@ def exp_translation(
     w: jax.Array,
     form: str = "axis_split",
     half: Optional[Tuple[jax.Array, jax.Array]] = None,
-    compensated: bool = True,
 ) -> jax.Array:
     """Translation t = V(ω) v of ``SE3.exp((v, ω))``, θ = ‖ω‖, in one of two equal forms.
 
@@ -60,9 +57,6 @@ def exp_translation(
               cancels at large angles (F0 = sin θ/θ is computed directly).
         half: ``(cos(θ/2), sin(θ/2)/(θ/2))``, each of shape ``batch``, from
             ``exp_half_angle``; passing it shares one sincos with the rotation.
-        compensated: evaluate the ``"axis_split"`` form's ω·v as an error-free dot
-            (``_scalar.dot_compensated``), needed only near θ = 2πk with v ⟂ ω, where
-            F0 → 0 (see ``by_angle``).
 
     Returns:
         ``(*batch, 3)``: t, with F0 = c·k, F1 = k²/2 and F2 all read from ``half``.
@@ -74,9 +68,7 @@ def exp_translation(
     wxv = cross(w, v)
     f1, f2 = (0.5 * k * k)[..., None], _scalar.F2(x, f0)[..., None]
     if form == "axis_split":
-        # cancels for v ⟂ ω near θ = 2πk, where F0 → 0; see the kernel
-        wv = (materialize(_scalar.dot_compensated(w, v)) if compensated else dot(w, v))[..., None]
-        return f0[..., None] * v + f1 * wxv + f2 * wv * w
+        return f0[..., None] * v + f1 * wxv + f2 * dot(w, v)[..., None] * w
     return v + f1 * wxv + f2 * cross(w, wxv)
 
 
@@ -146,6 +138,8 @@ class SE3(SEBase[SO3]):
     tangent_dim = 6
     space_dim = 3
     _rotation_type = SO3
+    _interpolate_in_chunks = True
+    _interpolate_materializes = True
 
     @classmethod
     @override
@@ -155,8 +149,7 @@ class SE3(SEBase[SO3]):
         q = exp_SO3(ω) as in ``SO3.exp``; t = V(ω) v, θ = ‖ω‖, evaluated as
         F0 v + F1 (ω × v) + F2 (ω·v) ω (Zhang 2022, §8.4, adapted to ω = θ·axis; equal to
         Eberly 2024, eq. 36, v + F1 ω × v + F2 ω × (ω × v), which cancels beyond π; see
-        ``exp_translation``), with cross products and no 3×3 matrices. On CPU a batch of at
-        least 2^19 elements runs in 2^16-element chunks (``docs/design/memory-and-chunks.md``).
+        ``exp_translation``), with cross products and no 3×3 matrices.
 
         Args:
             tangent: ``(*batch, 6)``, ``(vx, vy, vz, ωx, ωy, ωz)``.
@@ -165,21 +158,11 @@ class SE3(SEBase[SO3]):
             SE3 with batch axes ``batch``. Any rotation angle whose square is finite is
             accepted (float32 θ < 1.8e19, float64 θ < 1.3e154); beyond, the result is NaN.
         """
-        xi = materialize(cls._check_tangent(tangent))
-
-        def kernel(compensated: bool, w: jax.Array, v: jax.Array) -> jax.Array:
-            half = exp_half_angle(w, compensated)
-            if compensated:
-                # Computed once, not once per consumer inside the chunk loop
-                # (docs/design/memory-and-chunks.md).
-                half = materialize(half)
-            t = exp_translation(v, w, _KERNEL_FORM, half, compensated)
-            return jnp.concatenate([exp_quaternion(w, half), t], axis=-1)
-
-        def whole(xi: jax.Array) -> jax.Array:
-            return by_angle(kernel, xi[..., 3:], xi[..., :3])
-
-        return SE3(in_chunks(whole, xi.shape[:-1], xi))
+        xi = cls._check_tangent(tangent)
+        v, w = xi[..., :3], xi[..., 3:]
+        half = exp_half_angle(w)
+        t = exp_translation(v, w, _KERNEL_FORM, half)
+        return SE3(jnp.concatenate([exp_quaternion(w, half), t], axis=-1))
 
     @override
     def log(self) -> jax.Array:
@@ -189,7 +172,7 @@ class SE3(SEBase[SO3]):
         Barfoot 2017, eq. 7.85), evaluated as h t − ½ ω × t + G (ω·t) ω with
         h = (θ/2)cot(θ/2) and G = (1 − h)/θ² (Zhang 2022, §9, adapted to ω = θ·axis: no
         cancellation near π; see ``log_translation``)."""
-        p = materialize(self.wxyz_xyz)
+        p = self.wxyz_xyz
         u, s, h = log_quaternion_parts(p[..., :4])
         v = log_translation(p[..., 4:], u, s, h, _KERNEL_FORM)
         return jnp.concatenate([v, s[..., None] * u], axis=-1)
@@ -265,8 +248,7 @@ class SE3(SEBase[SO3]):
         J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ) (block inverse of ``jac_right``, in closed
         form)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
-        # In memory before the products, which read every entry three times over.
-        Jinv, Q = materialize(jac_right_inv_so3(xi[..., 3:]), cls._q_block(xi))
+        Jinv, Q = jac_right_inv_so3(xi[..., 3:]), cls._q_block(xi)
         return cls._blocks(Jinv, -matmul(matmul(Jinv, Q), Jinv))
 
     @classmethod

@@ -12,7 +12,7 @@ from . import _scalar, hints
 from ._base import SOBase
 from ._checks import as_float_array, resolve_dtype
 from ._pytree import pytree_dataclass
-from ._xla import aligned, constant
+from ._xla import constant
 
 
 @pytree_dataclass
@@ -31,10 +31,6 @@ class SO2(SOBase):
     parameters_dim = 2
     tangent_dim = 1
     space_dim = 2
-    # Its interpolate fuses into one kernel with no temporaries; chunks would only add the
-    # loop (docs/design/memory-and-chunks.md).
-    _interpolate_in_chunks = False
-
     # -- factories ------------------------------------------------------------------
 
     @staticmethod
@@ -146,20 +142,6 @@ class SO2(SOBase):
         # Inside SE2's matrices a stack fuses better than as_matrix's select.
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
         return jnp.stack([jnp.stack([c, -s], -1), jnp.stack([s, c], -1)], -2)
-
-    @override
-    def apply(self, target: hints.Array) -> jax.Array:
-        R, p = aligned(self, self._check_points(target))
-        return R._apply_kernel(p)
-
-    @override
-    def multiply(self, other: SO2) -> SO2:
-        a, b = aligned(self, other)
-        return a._multiply_kernel(b)
-
-    # SO2's public operations are its kernels: they read each component twice and have
-    # never carried a barrier.
-    _kernels_reread = False
 
     @override
     def _apply_kernel(self, points: jax.Array) -> jax.Array:

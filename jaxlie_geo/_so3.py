@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Callable, Optional, Tuple, TypeVar
+from typing import Any, Optional, Tuple
 
 import jax
 import jax.numpy as jnp
@@ -11,12 +11,10 @@ from typing_extensions import override
 
 from . import _scalar, hints
 from ._base import SOBase
-from ._checks import as_float_array, resolve_dtype, static_size
+from ._checks import as_float_array, resolve_dtype
 from ._pytree import pytree_dataclass
 from ._scalar import sq_norm
-from ._xla import aligned, constant, materialize
-
-T = TypeVar("T")
+from ._xla import constant
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -47,63 +45,10 @@ def exp_quaternion(
     return jnp.concatenate([c[..., None], (0.5 * k)[..., None] * omega], axis=-1)
 
 
-def exp_half_angle(omega: jax.Array, compensated: bool = True) -> Tuple[jax.Array, jax.Array]:
-    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖, each of shape ``batch`` for ω of ``(*batch, 3)``.
-
-    With ``compensated``, θ² is summed as hi + lo so that angles far beyond π keep full
-    accuracy (with a plain θ², 5 ulp at θ ≈ 16); without, θ² is the plain sum of squares,
-    accurate while θ² ≤ ``_scalar.HALF_ANGLE_PLAIN_MAX`` (see ``by_angle``)."""
-    if compensated:
-        return _scalar.half_angle(*_scalar.sq_norm_compensated(omega))
+def exp_half_angle(omega: jax.Array) -> Tuple[jax.Array, jax.Array]:
+    """(cos(θ/2), sin(θ/2)/(θ/2)), θ = ‖ω‖, each of shape ``batch`` for ω of ``(*batch, 3)``
+    (``_scalar.half_angle`` of the plain θ²)."""
     return _scalar.half_angle(sq_norm(omega))
-
-
-_BY_ANGLE_MIN_BATCH = 256
-
-
-def by_angle(kernel: Callable[..., T], omega: jax.Array, *args: jax.Array) -> T:
-    """``kernel(compensated, omega, *args)``, with the error-free (compensated) sums only
-    where the batch needs them.
-
-    Angles far beyond π need the compensated θ² and dot products (``exp_half_angle``,
-    ``_scalar.dot_compensated``); the plain kernel is as accurate while every rotation
-    angle ‖ω‖ of the batch is at most √``HALF_ANGLE_PLAIN_MAX``. On CPU, for batches of at
-    least ``_BY_ANGLE_MIN_BATCH`` elements, one batch-level ``lax.cond`` picks the kernel
-    (static shapes: under ``vmap`` the function sees one element; a symbolic batch, as in
-    ``jax.export``, counts as large). Smaller batches and other backends always take the
-    compensated kernel. Why, and what the cond costs: ``docs/design/compile-time.md``.
-
-    Derivatives (a custom JVP) always differentiate the compensated kernel: both kernels
-    have the same derivative formulas, and the cond itself is never differentiated.
-
-    Args:
-        kernel: ``kernel(compensated: bool, omega, *args)``, returning any pytree.
-        omega: ``(*batch, 3)`` rotation vectors whose angles decide.
-        *args: further arrays the kernel reads. Every array the kernel depends on must be
-            passed in ``omega``/``args``, not closed over, so that its derivative is not
-            lost.
-
-    Returns:
-        The kernel's result."""
-    n = static_size(omega.shape[:-1])
-    if n is not None and n < _BY_ANGLE_MIN_BATCH:
-        return kernel(True, omega, *args)
-
-    @jax.custom_jvp
-    def chosen(omega: jax.Array, *args: jax.Array) -> T:
-        def on_cpu() -> T:
-            big = jnp.any(sq_norm(omega) > _scalar.HALF_ANGLE_PLAIN_MAX)
-            return jax.lax.cond(
-                big, lambda: kernel(True, omega, *args), lambda: kernel(False, omega, *args)
-            )
-
-        return jax.lax.platform_dependent(cpu=on_cpu, default=lambda: kernel(True, omega, *args))
-
-    @chosen.defjvp
-    def _(primals, tangents):  # type: ignore[no-untyped-def]
-        return jax.jvp(lambda *p: kernel(True, *p), primals, tangents)
-
-    return chosen(omega, *args)
 
 
 def log_quaternion(wxyz: jax.Array) -> jax.Array:
@@ -268,6 +213,7 @@ class SO3(SOBase):
     parameters_dim = 4
     tangent_dim = 3
     space_dim = 3
+    _interpolate_materializes = True
 
     # -- factories ------------------------------------------------------------------
 
@@ -442,8 +388,7 @@ class SO3(SOBase):
 
         q = (cos(θ/2), sin(θ/2)/θ · ω), θ = ‖ω‖: Rodrigues' formula
         R = I + F0 ω̂ + F1 ω̂² (Eberly 2024, eq. 27) in quaternion form. Both coefficients
-        come from ``_scalar.half_angle`` (closed forms with an exact custom JVP; θ²
-        compensated when the batch holds an angle beyond √10, see ``by_angle``).
+        come from ``_scalar.half_angle`` (closed forms with an exact custom JVP).
 
         Args:
             tangent: ``(*batch, 3)``, ``(ωx, ωy, ωz)``.
@@ -453,8 +398,7 @@ class SO3(SOBase):
             (θ < 1.8e19 in float32, 1.3e154 in float64; beyond, θ² overflows and the result
             is NaN, as jaxlie's is). For θ > π the result has w < 0 (it is not re-signed).
         """
-        w = materialize(cls._check_tangent(tangent))
-        return SO3(by_angle(lambda comp, w: exp_quaternion(w, exp_half_angle(w, comp)), w))
+        return SO3(exp_quaternion(cls._check_tangent(tangent)))
 
     @override
     def log(self) -> jax.Array:
@@ -465,7 +409,7 @@ class SO3(SOBase):
         (Eberly 2024, §9.2), which loses about √ε in the angle near π, it is accurate up to
         and at π; at exactly π (w = 0) the stored vector part decides the sign of ω. It
         depends on q's direction only (a drifted, non-unit q gives the log of q/|q|)."""
-        return log_quaternion(materialize(self.wxyz))
+        return log_quaternion(self.wxyz)
 
     @override
     def jlog(self) -> jax.Array:
@@ -524,19 +468,9 @@ class SO3(SOBase):
         return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
 
     @override
-    def apply(self, target: hints.Array) -> jax.Array:
-        """Rotate points, shape ``(*batch, 3)``: R(q) p, and for a non-unit q the sandwich
-        q p q* = |q|² R(q/|q|) p, as jaxlie (``rotate``). Batch axes broadcast."""
-        R, p = materialize(*aligned(self, self._check_points(target)))
-        return R._apply_kernel(p)
-
-    @override
-    def multiply(self, other: SO3) -> SO3:
-        a, b = materialize(*aligned(self, other))
-        return a._multiply_kernel(b)
-
-    @override
     def _apply_kernel(self, points: jax.Array) -> jax.Array:
+        """Rotate points, shape ``(*batch, 3)``: R(q) p, and for a non-unit q the sandwich
+        q p q* = |q|² R(q/|q|) p, as jaxlie (``rotate``)."""
         return rotate(self.wxyz, points)
 
     @override

@@ -13,7 +13,6 @@ import jax.numpy as jnp
 import numpy as np
 from conftest import (
     key_of,
-    over_dtypes,
     over_groups,
     over_quaternion_groups,
     random_element,
@@ -130,59 +129,32 @@ def test_matrix_products_at_full_precision(G):
     assert found > 0  # the walk sees the products (SE3's adjoint has one at least)
 
 
-@over_quaternion_groups
-@over_dtypes
-def test_exp_path_choice_is_invisible(G, dtype):
-    """The quaternion groups' exp picks its kernel per batch (``_so3.by_angle``): one element
-    far beyond π sends the whole batch through the compensated θ² kernel. Both kernels, and
-    vmap (where the choice becomes a select, always compensated), agree within 4 eps on the
-    angles below π, and within 0.5 eps just past the threshold."""
-    small = random_tangent(G, 3, (512,), dtype)  # angles below π: the plain kernel
-    big = random_tangent(G, 4, (1,), dtype, max_angle=30.0)
-    big[..., -3:] *= 30.0 / np.linalg.norm(big[..., -3:], axis=-1, keepdims=True)
-    alone = to_np(G.exp(small).parameters())
-    mixed = to_np(G.exp(np.concatenate([small, big])).parameters())
-    # vmap and a batch under _BY_ANGLE_MIN_BATCH: the compensated kernel.
-    mapped = to_np(jax.vmap(lambda x: G.exp(x).parameters())(small))
-    few = to_np(G.exp(small[:8]).parameters())
-    eps = float(jnp.finfo(dtype).eps)
-    scale = np.maximum(1.0, np.max(np.abs(alone), axis=-1, keepdims=True))
-    # Both kernels are exact to a few ulp (test_accuracy); they may round differently.
-    assert np.max(np.abs(mixed[:-1] - alone) / scale) <= 4 * eps
-    assert np.max(np.abs(mapped - alone) / scale) <= 4 * eps
-    assert np.max(np.abs(few - alone[:8]) / scale[:8]) <= 4 * eps
-    # The big element takes the compensated path either way (its accuracy beyond π is
-    # tests/test_accuracy.py's "beyond_pi" regime, whose batches hold only such angles).
-    np.testing.assert_array_equal(mixed[-1:], to_np(G.exp(big).parameters()))
-    # Just past the threshold (θ² in (10, 40)) a whole batch takes the compensated kernel:
-    # its quaternions agree with the per-element path (vmap: always compensated) to 0.5 eps;
-    # the plain kernel there (the threshold 4x too high) differs by 1.5 eps.
-    edge = random_tangent(G, 7, (512,), dtype)
-    rot = edge[..., -3:]
-    theta = np.sqrt(np.random.default_rng(7).uniform(10.0, 40.0, (512, 1)))
-    edge[..., -3:] = (rot / np.linalg.norm(rot, axis=-1, keepdims=True) * theta).astype(dtype)
-    batch = to_np(G.exp(edge).parameters()[..., :4])
-    each = to_np(jax.vmap(lambda x: G.exp(x).parameters()[..., :4])(edge))
-    assert np.max(np.abs(batch - each)) <= 0.5 * eps
+_BRANCHES = ("cond", "while", "platform_index", "all_reduce", "psum")
 
 
-@over_quaternion_groups
-@over_dtypes
-def test_exp_derivative_takes_one_kernel(G, dtype):
-    """by_angle's custom JVP: a gradient through a large batch differentiates the
-    compensated kernel alone (no cond to compile and transpose twice), and equals the
-    per-element gradient (vmap, which never takes the batch-level choice)."""
-    xi = random_tangent(G, 5, (512,), dtype)
-    w = random_tangent(G, 6, (512,), dtype)  # weights for all but qw (tangent_dim of them)
+@over_groups
+def test_exp_and_log_are_one_elementwise_kernel(G):
+    """exp and log, and their gradients, are one elementwise kernel: no batch-level branch,
+    loop or platform switch in the jaxpr (an element's result depends on that
+    element alone), and an element gives the same bits alone, in a batch of small angles
+    and in a batch that also holds angles far beyond π."""
+    x = random_tangent(G, 3, (512,), np.float32)
+    p = G.exp(x).parameters()
 
-    def loss(x, w):
-        return jnp.sum(w * G.exp(x).parameters()[..., 1:])
+    def loss(x):
+        return jnp.sum(G.exp(x).log() ** 2)
 
-    forward = str(jax.make_jaxpr(loss)(xi, w))
-    backward = str(jax.make_jaxpr(jax.grad(loss))(xi, w))
-    assert "cond[" in forward  # the choice is there on the forward pass (CPU) ...
-    assert "cond[" not in backward  # ... and not under differentiation
-    eps = float(jnp.finfo(dtype).eps)
-    np.testing.assert_allclose(
-        to_np(jax.grad(loss)(xi, w)), to_np(jax.vmap(jax.grad(loss))(xi, w)), rtol=0, atol=16 * eps
-    )
+    for name, f, arg in (
+        ("exp", lambda x: G.exp(x).parameters(), x),
+        ("log", lambda p: G(p).log(), p),
+        ("grad", jax.grad(loss), x),
+    ):
+        found = {e.primitive.name for e in _all_eqns(jax.make_jaxpr(f)(arg).jaxpr)}
+        assert not found & set(_BRANCHES), (name, found & set(_BRANCHES))
+    big = random_tangent(G, 4, (4,), np.float32)
+    rot = big[..., -3:] if G.tangent_dim >= 3 and G.space_dim == 3 else big[..., -1:]
+    rot *= 1e3 / np.linalg.norm(rot, axis=-1, keepdims=True)
+    alone = to_np(G.exp(x).parameters())
+    mixed = to_np(G.exp(np.concatenate([x, big])).parameters())
+    np.testing.assert_array_equal(mixed[:-4], alone)
+    np.testing.assert_array_equal(to_np(G.exp(x[:3]).parameters()), alone[:3])

@@ -491,7 +491,7 @@ def test_export_with_a_symbolic_batch(G, dtype):
     spec = lambda k: jax.ShapeDtypeStruct((b, k), dtype)  # noqa: E731
     k, d, m = G.tangent_dim, G.space_dim, G.parameters_dim
     exported = export.export(jax.jit(f))(spec(m), spec(m), spec(k), spec(d))
-    n = 300  # at least by_angle's minimum batch: jit takes the same cond as the export
+    n = 300
     args = (
         random_element(G, 0, (n,), dtype).parameters(),
         random_element(G, 1, (n,), dtype).parameters(),
