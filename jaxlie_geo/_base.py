@@ -74,13 +74,14 @@ class MatrixLieGroup(abc.ABC):
     """Dimension k of the tangent space (the Lie algebra)."""
     space_dim: ClassVar[int]
     """Dimension of the points the group acts on."""
-    # How ``interpolate`` is scheduled on large batches; each is set only where it measured
-    # ≥ 1.3x faster at 10⁶ elements (docs/design/memory-and-chunks.md).
+    # Scheduling, never values (docs/design/memory-and-chunks.md has the measurements).
+    _kernels_reread: ClassVar[bool] = False
+    """Whether the group's kernels read each input component several times (the quaternion
+    groups: a Hamilton product reads each of 8 components 4 times), so that ``multiply``,
+    ``apply``, ``inverse`` and ``interpolate`` compute their inputs into memory first
+    (``_in_memory``)."""
     _interpolate_in_chunks: ClassVar[bool] = False
     """Whether large ``interpolate`` batches run in chunks on CPU (``_batch.in_chunks``)."""
-    _interpolate_materializes: ClassVar[bool] = False
-    """Whether ``interpolate`` computes its log and exp into memory before the next kernel
-    reads them (``_xla.materialize``)."""
 
     # -- construction ---------------------------------------------------------------
 
@@ -352,12 +353,15 @@ class MatrixLieGroup(abc.ABC):
         t, tangent = aligned(t[..., None], self._in_memory(tangent))
         return self.multiply(self._in_memory(G.exp(t * tangent)))
 
-    def _in_memory(self, x: Any) -> Any:
-        """``x`` computed once into memory (``_xla.materialize``) where the group sets
-        ``_interpolate_materializes``, else ``x``. The quaternion kernels read every input
-        component several times, and without the barrier XLA:CPU recomputes a producer
-        such as log's arctangent or exp's sincos per read."""
-        return materialize(x) if self._interpolate_materializes else x
+    def _in_memory(self, *xs: Any) -> Any:
+        """The inputs computed once into memory (``_xla.materialize``) where the group sets
+        ``_kernels_reread``, else as they are; one value for one input, else a tuple.
+        Without the barrier XLA:CPU fuses a producer into every read of it: an exp's sincos
+        is recomputed per read, and a chain of K compositions grows as 4^K (SO3, K = 4: no
+        compiled program after minutes)."""
+        if self._kernels_reread:
+            return materialize(*xs)
+        return xs[0] if len(xs) == 1 else xs
 
     # -- batch handling -------------------------------------------------------------
 
@@ -504,11 +508,11 @@ class SOBase(MatrixLieGroup):
     # kernels, which the SE groups also call on the rotation part of their elements.
 
     def apply(self, target: hints.Array) -> jax.Array:
-        R, p = aligned(self, self._check_points(target))
+        R, p = self._in_memory(*aligned(self, self._check_points(target)))
         return R._apply_kernel(p)
 
     def multiply(self, other: Self) -> Self:
-        a, b = aligned(self, other)
+        a, b = self._in_memory(*aligned(self, other))
         return a._multiply_kernel(b)
 
     @abc.abstractmethod
@@ -621,12 +625,15 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         rot = cls._rotation_type.identity(batch_axes, dtype)
         return cls.from_rotation(rot)
 
+    # Barriers on whole elements only, then the rotation's kernels on slices: with jax ≥ 0.11
+    # XLA:CPU turns a barrier on a slice into a copy of it.
+
     def apply(self, target: hints.Array) -> jax.Array:
-        T, target = aligned(self, self._check_points(target))
+        T, target = self._in_memory(*aligned(self, self._check_points(target)))
         return T.rotation()._apply_kernel(target) + T.translation()
 
     def multiply(self, other: Self) -> Self:
-        a, b = aligned(self, other)
+        a, b = self._in_memory(*aligned(self, other))
         R = a.rotation()
         return type(self).from_rotation_and_translation(
             R._multiply_kernel(b.rotation()), R._apply_kernel(b.translation()) + a.translation()
@@ -638,7 +645,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         R_a⁻¹t_b and cancels ε·|t_a| (float32 poses 2·10⁴ from the origin, 0.5 apart:
         the residual was off by 1e-3, 10⁴ ulp against mpmath; now ≤ 1.5 ulp). One rotation
         of a point instead of two."""
-        a, b = aligned(self, other)
+        a, b = self._in_memory(*aligned(self, other))
         R_inv = a.rotation().inverse()
         return type(self).from_rotation_and_translation(
             R_inv._multiply_kernel(b.rotation()),
@@ -646,9 +653,10 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         )
 
     def inverse(self) -> Self:
-        R_inv = self.rotation().inverse()
+        T = self._in_memory(self)
+        R_inv = T.rotation().inverse()
         return type(self).from_rotation_and_translation(
-            R_inv, -R_inv._apply_kernel(self.translation())
+            R_inv, -R_inv._apply_kernel(T.translation())
         )
 
     def normalize(self) -> Self:

@@ -46,6 +46,7 @@ class SE2(SEBase[SO2]):
     tangent_dim = 3
     space_dim = 2
     _rotation_type = SO2
+    _kernels_reread = True
 
     @staticmethod
     def from_xy_theta(x: hints.Scalar, y: hints.Scalar, theta: hints.Scalar) -> SE2:

@@ -139,7 +139,7 @@ class SE3(SEBase[SO3]):
     space_dim = 3
     _rotation_type = SO3
     _interpolate_in_chunks = True
-    _interpolate_materializes = True
+    _kernels_reread = True
 
     @classmethod
     @override

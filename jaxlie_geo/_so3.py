@@ -213,7 +213,7 @@ class SO3(SOBase):
     parameters_dim = 4
     tangent_dim = 3
     space_dim = 3
-    _interpolate_materializes = True
+    _kernels_reread = True
 
     # -- factories ------------------------------------------------------------------
 
