@@ -108,8 +108,17 @@ class MatrixLieGroup(abc.ABC):
     @classmethod
     @abc.abstractmethod
     def from_matrix(cls, matrix: hints.Array) -> Self:
-        """Element from its matrix, shape ``(*batch, matrix_dim, matrix_dim)``
-        (homogeneous for SE groups)."""
+        """The element nearest to ``matrix``: its rotation block projected onto the
+        rotations (the nearest in the Frobenius norm), for SE groups the translation column
+        taken as is and the bottom row ignored. A valid matrix gives the element it
+        represents.
+
+        Args:
+            matrix: ``(*batch, matrix_dim, matrix_dim)`` (homogeneous for SE groups), any
+                real matrix.
+
+        Returns:
+            The element, with batch axes ``batch``, in the matrix's dtype."""
 
     @classmethod
     @abc.abstractmethod
@@ -678,6 +687,10 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
 
     @classmethod
     def from_matrix(cls, matrix: hints.Array) -> Self:
+        """Pose from a ``(*batch, n+1, n+1)`` homogeneous matrix [[A, t], [·, ·]]: the
+        rotation nearest to the block A in the Frobenius norm (the rotation group's
+        ``from_matrix``: a projection), the translation t as is; the bottom row is not read
+        (it is not checked to be (0, …, 0, 1)). Batch axes ``batch``, the matrix's dtype."""
         m = cls._check_matrix(matrix, "from_matrix")
         n = cls.space_dim
         return cls.from_rotation_and_translation(

@@ -11,6 +11,7 @@ from typing_extensions import override
 from . import _scalar, hints
 from ._base import SOBase
 from ._checks import as_float_array, resolve_dtype
+from ._projection import nearest_unit_complex
 from ._pytree import pytree_dataclass
 from ._xla import constant
 
@@ -48,7 +49,7 @@ class SO2(SOBase):
 
     def as_radians(self) -> jax.Array:
         """Angle atan2(sin, cos), shape ``batch``, in [-π, π]: -π only for a rotation by π
-        whose stored sine is -0.0 (``from_matrix(-I)`` stores one), as in jaxlie and NumPy.
+        whose stored sine is -0.0 (``SO2(jnp.array([-1.0, -0.0]))``), as in jaxlie and NumPy.
         Depends on the direction of ``unit_complex`` only."""
         c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
         return jnp.arctan2(s, c)
@@ -62,8 +63,24 @@ class SO2(SOBase):
     @classmethod
     @override
     def from_matrix(cls, matrix: hints.Array) -> SO2:
-        m = cls._check_matrix(matrix, "from_matrix")
-        return SO2(m[..., :, 0])
+        """The rotation nearest to ``matrix`` in the Frobenius norm (a projection onto SO(2)).
+
+        θ = atan2(m10 − m01, m00 + m11), which maximises tr(R(θ)ᵀM) =
+        (m00 + m11) cos θ + (m10 − m01) sin θ; stored as the unit vector along
+        (m00 + m11, m10 − m01), without trigonometry (``jaxlie_geo/_projection.py``). A
+        rotation matrix gives its own first column within 1 ulp (jaxlie reads that column
+        as is). Where m00 + m11 = m10 − m01 = 0 (the zero matrix and every reflection
+        [[a, b], [b, −a]]) all rotations are equally near, and the result is the
+        identity. ``from_matrix(-I)`` stores the sine +0.0 (angle π).
+        Differentiable; the derivative is 0 on that set.
+
+        Args:
+            matrix: ``(*batch, 2, 2)``, any real matrix (not only a rotation).
+
+        Returns:
+            SO2 with batch axes ``batch``, in the matrix's dtype.
+        """
+        return SO2(nearest_unit_complex(cls._check_matrix(matrix, "from_matrix")))
 
     @classmethod
     @override

@@ -1,0 +1,305 @@
+"""Nearest rotations: the projections behind ``from_matrix``.
+
+``from_matrix`` of every group returns the rotation R nearest to the given matrix block M in
+the Frobenius norm. Since ‖R − M‖² = ‖R‖² + ‖M‖² − 2 tr(RᵀM) and ‖R‖² is fixed, that is
+the rotation that maximises tr(RᵀM).
+
+SO(2): tr(R(θ)ᵀM) = (m00 + m11) cos θ + (m10 − m01) sin θ, maximised by
+θ = atan2(m10 − m01, m00 + m11).
+
+SO(3): for R = R(q), tr(RᵀM) = qᵀKq is a quadratic form in the quaternion, with the
+symmetric, traceless 4×4 matrix (order w, x, y, z)
+
+    K = [[m00+m11+m22, m21−m12,      m02−m20,      m10−m01    ],
+         [m21−m12,     m00−m11−m22,  m01+m10,      m02+m20    ],
+         [m02−m20,     m01+m10,      m11−m00−m22,  m12+m21    ],
+         [m10−m01,     m02+m20,      m12+m21,      m22−m00−m11]],
+
+three times the matrix of I. Y. Bar-Itzhack, *New method for extracting the quaternion from a
+rotation matrix* (J. Guidance, Control, and Dynamics 23(6), 2000), the same construction as
+B. K. P. Horn's N in *Closed-form solution of absolute orientation using unit quaternions*
+(JOSA A 4(4), 1987, §4). The nearest rotation is the quaternion of K's largest eigenvalue.
+With M = U diag(d1, d2, d3) Vᵀ, U and V rotations and d1 ≥ d2 ≥ |d3| (d3 < 0 iff det M < 0),
+the eigenvalues of K are d1+d2+d3 ≥ d1−d2−d3 ≥ d2−d1−d3 ≥ d3−d1−d2, and the nearest rotation
+is U Vᵀ (with an ordinary SVD, orthogonal factors and singular values ≥ 0:
+U diag(1, 1, det UVᵀ) Vᵀ). It is unique iff d2 + d3 > 0, the gap between K's two largest
+eigenvalues being 2(d2 + d3). For a rotation, K = 4qqᵀ − I (eigenvalues 3, −1, −1, −1).
+
+The eigenvector is computed by one elementwise computation, the same for every input;
+the matrix is first scaled by a power of two (exact) so that its largest entry is in [1, 2).
+The cyclic Jacobi method (G. H. Golub and C. F. Van Loan, *Matrix Computations*, 4th ed.,
+2013, §8.5) runs a fixed number of sweeps: each sweep applies the plane rotations (0,1),
+(2,3), (0,2), (1,3), (0,3), (1,2), each zeroing one off-diagonal entry, and accumulates them
+in V; K → VᵀKV becomes diagonal, and the column of V at its largest diagonal entry is the
+eigenvector. Jacobi converges quadratically whatever the spectrum, to an eigenvector as
+accurate as its conditioning allows (error about ε/gap), also for repeated eigenvalues,
+where any vector of the top eigenspace is a nearest rotation. Sweeps: 4 (float32 and
+narrower), 5 (float64); against 8 sweeps on the sets below, one fewer left errors up to
+2·10⁵ ulp (float32) and 10⁸ ulp (float64), while the chosen counts agree within 0.5 ulp. A
+last multiplication by K + cI, c = max(λ₁/3, −(λ₁ + λ_min)/2) from Jacobi's eigenvalues,
+leaves the top eigenvector, amplifies no other component, and brings a near-rotation back
+to rounding. There is no data-dependent branch and no loop with a data-dependent count:
+each element's result depends on that element alone, and a batch sharded over several
+devices is computed without communication.
+
+Starting Jacobi from Shepperd's estimate instead (K expressed in the basis of q₀ ⊗ eᵢ, that
+is, the K of R(q₀)ᵀM, nearly diag(3, −1, −1, −1) for a near-rotation) saves no sweep for a
+fixed count that covers every input: the rotations within the nearly degenerate block of
+the −1 eigenvalues refill the zeroed entries of the first row, and Gaussian matrices and
+noisy reflections still need 4 (float32) and 5 (float64) sweeps.
+
+Accuracy, against a long-double reference (K's eigenvector refined by Rayleigh-quotient
+iteration), as the largest entry error of the rotation matrix, over 20 000 matrices each of:
+rotations; rotations with Gaussian noise of 1e-6, 1e-3, 1e-1 and 0.3; Gaussian matrices;
+reflections with noise 0.1; rank-2 matrices. Float32 and float64 alike: at most 2.0 ulp for
+the rotations and the noisy rotations, and at most 1.3 ulp · κ everywhere, κ =
+(d1 + d2 + d3)/(d2 + d3) the conditioning of the nearest rotation (Gaussian matrices: up to
+35 ulp in float32, 108 in float64). The quaternion of a rotation is within 2 ulp
+of jaxlie's (Shepperd's), and of mpmath's within 4 ulp at and near π (``tests``).
+
+Speed (CPU, 2 cores, jit, 10⁶ matrices): the same for every input, rotations or not, about
+0.5 s in float32 and 0.75–1.4 s in float64 (timings on a shared machine); the Jacobi sweeps
+dominate, about 110 ms per sweep at 10⁶ float32 matrices on XLA:CPU, whether the sweeps are
+a ``fori_loop`` or unrolled. Alternatives measured: ``jnp.linalg.eigh`` on the batch of K took
+13.5x Shepperd's time (10⁶ float32 matrices), and its derivative is NaN whenever K has a
+repeated eigenvalue (any rotation: −1 is triple); power iteration alone, or repeated
+squaring of K + cI, converges with a ratio near 1 for ill-conditioned inputs (Gaussian
+matrices still 10⁶ ulp away after 2⁸ steps); Rayleigh-quotient iteration from such a start
+may converge to another eigenvector. A power iteration certified per element is cheaper
+for near-rotations, but choosing it or Jacobi for a whole batch makes one element's
+arithmetic depend on the others (and costs a reduction across devices), while choosing per
+element pays for both.
+
+Derivative (a custom JVP, exact whatever the iteration): with R the result, S = RᵀM is
+symmetric at the optimum, so M = RS, Ṁ = ṘS + RṠ and Ṙ = R ω̂ give RᵀṀ − ṀᵀR = ω̂S + Sω̂,
+whose vee is ((tr S) I − S) ω; ω is solved for by the adjugate, and q̇ = ½ q ⊗ (0, ω).
+(tr S) I − S has eigenvalues d2 + d3, d1 + d3, d1 + d2: it is singular exactly where the
+nearest rotation is not unique, where the derivative does not exist; the JVP is then 0 if
+the matrix is exactly singular, and of size 1/(d2 + d3) near it.
+"""
+
+from __future__ import annotations
+
+from typing import Dict, Iterable, List, Tuple
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["nearest_quaternion", "nearest_unit_complex"]
+
+_PAIRS = ((0, 1), (2, 3), (0, 2), (1, 3), (0, 3), (1, 2))
+_SYM = tuple((i, j) for i in range(4) for j in range(i, 4))
+_FULL = tuple((i, j) for i in range(4) for j in range(4))
+_BITS = {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}
+
+
+def _sweeps(dtype: jnp.dtype) -> int:
+    """Jacobi sweeps for ``dtype`` (measured: see the module docstring)."""
+    return 5 if jnp.finfo(dtype).nmant > 23 else 4
+
+
+def _pow2_scale(m: jax.Array) -> jax.Array:
+    """2^k per matrix (the last two axes of ``m``), shape ``m.shape[:-2]``, with the largest
+    |entry| · 2^k in [1, 2); k is clipped so that 2^k is a normal float (for a zero matrix
+    any factor would do). Built from the exponent bits: exact, and cheaper than
+    ``frexp``/``ldexp``."""
+    fi = jnp.finfo(m.dtype)
+    int_t = _BITS[m.dtype.itemsize]
+    bias = fi.maxexp - 1
+    big = jnp.max(jnp.abs(m), axis=(-2, -1))
+    e = jax.lax.shift_right_logical(jax.lax.bitcast_convert_type(big, int_t), int_t(fi.nmant))
+    k = jnp.clip(int_t(bias) - e, 1 - bias, bias)
+    return jax.lax.bitcast_convert_type(
+        jax.lax.shift_left(k + int_t(bias), int_t(fi.nmant)), m.dtype
+    )
+
+
+def _entries(m: jax.Array) -> List[List[jax.Array]]:
+    """The nine entries of ``(*batch, 3, 3)``, each of shape ``batch``, read from one
+    transposed copy: XLA:CPU reads contiguous rows at a fraction of the cost of nine
+    strided slices (the whole float32 kernel at 10⁶: 175 → 82 ms)."""
+    flat = jnp.moveaxis(m.reshape((*m.shape[:-2], 9)), -1, 0)
+    return [[flat[3 * i + j] for j in range(3)] for i in range(3)]
+
+
+def _k_matrix(r: List[List[jax.Array]]) -> Dict[Tuple[int, int], jax.Array]:
+    """The upper triangle of K (module docstring), keyed by (i, j), i ≤ j."""
+    return {
+        (0, 0): r[0][0] + r[1][1] + r[2][2],
+        (0, 1): r[2][1] - r[1][2],
+        (0, 2): r[0][2] - r[2][0],
+        (0, 3): r[1][0] - r[0][1],
+        (1, 1): r[0][0] - r[1][1] - r[2][2],
+        (1, 2): r[0][1] + r[1][0],
+        (1, 3): r[0][2] + r[2][0],
+        (2, 2): r[1][1] - r[0][0] - r[2][2],
+        (2, 3): r[1][2] + r[2][1],
+        (3, 3): r[2][2] - r[0][0] - r[1][1],
+    }
+
+
+def _sym(a: Dict[Tuple[int, int], jax.Array], i: int, j: int) -> jax.Array:
+    return a[(i, j) if i <= j else (j, i)]
+
+
+def _sum(xs: Iterable[jax.Array]) -> jax.Array:
+    """Σ xs, written out as additions (no reduction: it stays in its neighbours' fused loop)."""
+    it = iter(xs)
+    out = next(it)
+    for x in it:
+        out = out + x
+    return out
+
+
+def _jacobi_sweep(state: List[jax.Array]) -> List[jax.Array]:
+    """One cyclic sweep on (the upper triangle of K, the 16 entries of V)."""
+    a = dict(zip(_SYM, state[:10]))
+    v = dict(zip(_FULL, state[10:]))
+    for p, q in _PAIRS:
+        apq, d = a[(p, q)], a[(q, q)] - a[(p, p)]
+        # t = tan of the angle that zeroes a_pq: sign(d)·2a_pq/(|d| + √(d² + 4a_pq²)), the
+        # smaller root (Golub and Van Loan §8.5.1), 0 where a_pq = d = 0.
+        den = jnp.abs(d) + jnp.sqrt(d * d + 4.0 * apq * apq)
+        ok = den > 0
+        t = jnp.where(ok, 2.0 * apq / jnp.where(ok, den, 1.0), 0.0)
+        t = jnp.where(d < 0, -t, t)
+        c = 1.0 / jnp.sqrt(1.0 + t * t)
+        s = t * c
+        new = dict(a)
+        new[(p, p)] = a[(p, p)] - t * apq
+        new[(q, q)] = a[(q, q)] + t * apq
+        new[(p, q)] = jnp.zeros_like(apq)
+        for k in range(4):
+            if k not in (p, q):
+                akp, akq = _sym(a, k, p), _sym(a, k, q)
+                new[(min(k, p), max(k, p))] = c * akp - s * akq
+                new[(min(k, q), max(k, q))] = s * akp + c * akq
+        a = new
+        for k in range(4):
+            vp, vq = v[(k, p)], v[(k, q)]
+            v[(k, p)] = c * vp - s * vq
+            v[(k, q)] = s * vp + c * vq
+    return [a[key] for key in _SYM] + [v[key] for key in _FULL]
+
+
+def _rotation(q: jax.Array) -> List[List[jax.Array]]:
+    """Entries of R(q) for a unit quaternion ``(*batch, 4)``."""
+    w, x, y, z = (q[..., i] for i in range(4))
+    return [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+
+
+def _times(
+    k: Dict[Tuple[int, int], jax.Array], c: jax.Array, v: List[jax.Array]
+) -> List[jax.Array]:
+    """(K + cI) v."""
+    return [_sum(_sym(k, i, j) * v[j] for j in range(4)) + c * v[i] for i in range(4)]
+
+
+def _jacobi(
+    k: Dict[Tuple[int, int], jax.Array], dtype: jnp.dtype
+) -> Tuple[List[jax.Array], jax.Array, jax.Array]:
+    """Cyclic Jacobi on K (module docstring): (the column of V at the largest diagonal
+    entry of VᵀKV, that entry, the smallest)."""
+    one, zero = jnp.ones_like(k[(0, 0)]), jnp.zeros_like(k[(0, 0)])
+    v0 = [one if i == j else zero for i, j in _FULL]
+    state = [k[key] for key in _SYM] + v0
+    state = jax.lax.fori_loop(0, _sweeps(dtype), lambda _, s: _jacobi_sweep(s), state)
+    lam = [state[_SYM.index((i, i))] for i in range(4)]
+    vecs = dict(zip(_FULL, state[10:]))
+    top, low, col = lam[0], lam[0], [vecs[(i, 0)] for i in range(4)]
+    for j in range(1, 4):
+        better = lam[j] > top
+        top = jnp.where(better, lam[j], top)
+        low = jnp.minimum(low, lam[j])
+        col = [jnp.where(better, vecs[(i, j)], col[i]) for i in range(4)]
+    return col, top, low
+
+
+@jax.custom_jvp
+def nearest_quaternion(m: jax.Array) -> jax.Array:
+    """Unit quaternion (w, x, y, z) of the rotation nearest to ``m`` in the Frobenius norm:
+    the dominant eigenvector of K (module docstring), signed as jaxlie signs
+    ``SO3.from_matrix`` (after J. Day's branches on the diagonal: the component that jaxlie
+    computes, x if m22 < 0 and m00 > m11, y if m22 < 0 otherwise, z if m00 < −m11, else w,
+    is ≥ 0). Where the nearest rotation is not unique (d2 + d3 = 0: the zero matrix, rank 1,
+    orthogonal reflections), one of the nearest; for a diagonal ``m``, the basis vector at
+    the first largest diagonal entry of K (the identity for 0, diag(1, 0, 0) and
+    diag(1, 1, −1); the half turn about x for −I).
+
+    Args:
+        m: ``(*batch, 3, 3)``, floating; any matrix.
+
+    Returns:
+        ``(*batch, 4)``, in ``m``'s dtype.
+    """
+    scale = _pow2_scale(m)
+    r = _entries(m * scale[..., None, None])
+    k = _k_matrix(r)
+    v, top, low = _jacobi(k, m.dtype)
+    # One multiplication by K + cI (module docstring); skipped for K = 0 (top = 0).
+    c = jnp.maximum(top / 3.0, -0.5 * (top + low))
+    col = [jnp.where(top > 0, x, y) for x, y in zip(_times(k, c, v), v)]
+    norm = jnp.sqrt(_sum(x * x for x in col))
+    d0, d1, d2 = r[0][0], r[1][1], r[2][2]
+    day = jnp.where(d2 < 0, jnp.where(d0 > d1, col[1], col[2]),
+                    jnp.where(d0 < -d1, col[3], col[0]))  # fmt: skip
+    sign = jnp.where(day < 0, -1.0, 1.0).astype(m.dtype)
+    return jnp.moveaxis(jnp.stack([sign * (x / norm) for x in col]), 0, -1)
+
+
+@nearest_quaternion.defjvp
+def _nearest_quaternion_jvp(primals, tangents):  # type: ignore[no-untyped-def]
+    (m,), (dm,) = primals, tangents
+    q = nearest_quaternion(m)
+    scale = _pow2_scale(m)[..., None, None]
+    a, da = _entries(m * scale), _entries(dm * scale)
+    rot = _rotation(q)
+    # S = RᵀA (symmetrised), X = RᵀȦ, H = (tr S) I − S, ω = H⁻¹ vee(X − Xᵀ).
+    s = [[_sum(rot[k][i] * a[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+    x = [[_sum(rot[k][i] * da[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+    tr = s[0][0] + s[1][1] + s[2][2]
+    h = [[(tr if i == j else 0.0) - 0.5 * (s[i][j] + s[j][i]) for j in range(3)] for i in range(3)]
+    rhs = [x[2][1] - x[1][2], x[0][2] - x[2][0], x[1][0] - x[0][1]]
+    adj = [
+        [h[(j + 1) % 3][(i + 1) % 3] * h[(j + 2) % 3][(i + 2) % 3]
+         - h[(j + 1) % 3][(i + 2) % 3] * h[(j + 2) % 3][(i + 1) % 3] for j in range(3)]
+        for i in range(3)
+    ]  # fmt: skip
+    det = _sum(h[0][j] * adj[j][0] for j in range(3))
+    ok = det != 0
+    inv = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
+    w = [inv * _sum(adj[i][j] * rhs[j] for j in range(3)) for i in range(3)]
+    qw, qx, qy, qz = (q[..., i] for i in range(4))
+    dq = [
+        -0.5 * (qx * w[0] + qy * w[1] + qz * w[2]),
+        0.5 * (qw * w[0] + qy * w[2] - qz * w[1]),
+        0.5 * (qw * w[1] + qz * w[0] - qx * w[2]),
+        0.5 * (qw * w[2] + qx * w[1] - qy * w[0]),
+    ]
+    return q, jnp.stack(dq, axis=-1)
+
+
+def nearest_unit_complex(m: jax.Array) -> jax.Array:
+    """(cos θ, sin θ) of the planar rotation nearest to ``m`` in the Frobenius norm,
+    θ = atan2(m10 − m01, m00 + m11) (module docstring), computed without trigonometry as
+    the unit vector along (m00 + m11, m10 − m01). Where m00 + m11 = m10 − m01 = 0 (the zero
+    matrix, every reflection [[a, b], [b, −a]]) every rotation is equally near: (1, 0), the
+    identity. Derivatives are those of the formula (0 on that set).
+
+    Args:
+        m: ``(*batch, 2, 2)``, floating; any matrix.
+
+    Returns:
+        ``(*batch, 2)``, in ``m``'s dtype.
+    """
+    cos = m[..., 0, 0] + m[..., 1, 1]
+    sin = m[..., 1, 0] - m[..., 0, 1]
+    ok = (cos != 0) | (sin != 0)
+    v = jnp.stack([jnp.where(ok, cos, 1.0), jnp.where(ok, sin, 0.0)], axis=-1)
+    scale = _pow2_scale(v[..., None])[..., None]
+    v = v * scale
+    return v / jnp.sqrt(v[..., :1] * v[..., :1] + v[..., 1:] * v[..., 1:])
