@@ -80,6 +80,9 @@ class MatrixLieGroup(abc.ABC):
     groups: a Hamilton product reads each of 8 components 4 times), so that ``multiply``,
     ``apply``, ``inverse`` and ``interpolate`` compute their inputs into memory first
     (``_in_memory``)."""
+    _interpolate_in_memory: ClassVar[bool] = False
+    """Whether ``interpolate`` also computes its relative element, log and exp into memory
+    before the next kernel reads them."""
     _interpolate_in_chunks: ClassVar[bool] = False
     """Whether large ``interpolate`` batches run in chunks on CPU (``_batch.in_chunks``)."""
 
@@ -359,8 +362,13 @@ class MatrixLieGroup(abc.ABC):
         t = as_float_array(t, "t", (), where, like=tangent)
         batch = check_batches(where, "batch axes of the path and of t", tangent.shape[:-1], t.shape)
         t = jnp.broadcast_to(t.astype(jnp.result_type(t, tangent)), batch)
-        t, tangent = aligned(t[..., None], self._in_memory(tangent))
-        return self.multiply(self._in_memory(G.exp(t * tangent)))
+        t, tangent = aligned(t[..., None], self._in_memory_along(tangent))
+        return self.multiply(self._in_memory_along(G.exp(t * tangent)))
+
+    def _in_memory_along(self, x: Any) -> Any:
+        """``x`` computed into memory inside ``interpolate`` and geodesics, where the group
+        sets ``_interpolate_in_memory``."""
+        return materialize(x) if self._interpolate_in_memory else x
 
     def _in_memory(self, *xs: Any) -> Any:
         """The inputs computed once into memory (``_xla.materialize``) where the group sets
@@ -730,7 +738,7 @@ def valid_atol(dtype: Any) -> float:
 
 def _interpolate(a: GroupT, b: GroupT, t: Any) -> GroupT:
     """``a @ exp(t · log(a⁻¹ @ b))``: ``interpolate``'s body, element by element."""
-    return a._along(a._in_memory(a._between(b)).log(), t)
+    return a._along(a._in_memory_along(a._between(b)).log(), t)
 
 
 def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:

@@ -140,6 +140,7 @@ class SE3(SEBase[SO3]):
     _rotation_type = SO3
     _interpolate_in_chunks = True
     _kernels_reread = True
+    _interpolate_in_memory = True
 
     @classmethod
     @override

@@ -215,6 +215,7 @@ class SO3(SOBase):
     tangent_dim = 3
     space_dim = 3
     _kernels_reread = True
+    _interpolate_in_memory = True
 
     # -- factories ------------------------------------------------------------------
 
