@@ -7,6 +7,10 @@ The raw results are JSON files, one per machine and table::
     benchmarks/raw/<machine>/speed-float64.json      run.py --dtype float64 --save
     benchmarks/raw/<machine>/jacobians-float32.json  jacobians.py --save
     benchmarks/raw/<machine>/accuracy.json           accuracy.py --save
+    benchmarks/raw/<machine>/baseline-speed-<dtype>.json
+                                                     run.py --json of an earlier commit,
+                                                     with a "change" entry: the page shows
+                                                     it beside today's run, before/after
 
 Each benchmark script, given ``--save``, replaces its file for the machine it runs on and
 calls ``write_page``; ``python benchmarks/report.py`` re-renders the page alone. The page
@@ -299,9 +303,8 @@ up.
 
 Where jaxlie_geo is slower, the reasons are measured in the design notes: at 10³ elements on
 two CPU cores, XLA:CPU splits jaxlie_geo's larger fusions over both threads
-([threads at small batches](../docs/design/threads-at-small-batches.md)); SO3 exp,
-interpolate and grad and SE3 grad compile slower because of the kernel that keeps angles far
-beyond π accurate ([compile time](../docs/design/compile-time.md)).
+([threads at small batches](../docs/design/threads-at-small-batches.md)); SO3 grad and SE3
+grad compile slower, mostly in tracing ([compile time](../docs/design/compile-time.md)).
 """
 
 
@@ -564,6 +567,68 @@ def _jacobian_table(data: dict) -> list:
     return lines
 
 
+def change_section(raw: dict, order: list) -> list:
+    """Before and after a change: a baseline run of an earlier commit (``baseline-speed-*``,
+    with its ``change`` entry) beside today's run on the same machine."""
+    pairs = [
+        (raw[m][f"baseline-speed-{dt}"], raw[m][f"speed-{dt}"])
+        for m in order
+        for dt in ("float32", "float64")
+        if f"baseline-speed-{dt}" in raw[m] and f"speed-{dt}" in raw[m]
+    ]
+    if not pairs:
+        return []
+    change = pairs[0][0]["change"]
+    lines = [f"## Before and after: {change['title']}", "", change["text"], ""]
+    for before, after in pairs:
+        lines += _change_table(before, after)
+    return lines
+
+
+def _change_table(before: dict, after: dict) -> list:
+    old = {(r["group"], r["op"], r["n"]): r for r in before["results"]}
+    new = {(r["group"], r["op"], r["n"]): r for r in after["results"]}
+    sizes = sorted({k[2] for k in old if k in new and k[2] > 1})
+    cases = [(g, o) for g in GROUPS for o in OPS if any((g, o, n) in old for n in sizes)]
+    header, align = ["group", "op"], "ll"
+    for n in sizes:
+        header += [f"{pretty_n(n)}: jaxlie_geo", f"{pretty_n(n)}: speed-up"]
+        align += "rr"
+    top = sizes[-1]
+    header.append(f"compile ms at {pretty_n(top)} (jaxlie)")
+    align += "r"
+    body = []
+    for g, o in cases:
+        row = [g, o]
+        for n in sizes:
+            a, b = old.get((g, o, n)), new.get((g, o, n))
+            if a and b:
+                row += [
+                    f"{fmt_ns(a['geo_ns_per_elem'])} → {fmt_ns(b['geo_ns_per_elem'])}",
+                    f"{a['ratio']:.2f} → {b['ratio']:.2f}",
+                ]
+            else:
+                row += ["", ""]
+        a, b = old.get((g, o, top)), new.get((g, o, top))
+        row.append(
+            f"{a['compile_geo_ms']:.0f} → {b['compile_geo_ms']:.0f} ({b['compile_ref_ms']:.0f})"
+            if a and b
+            else ""
+        )
+        body.append(row)
+    info, was = after["machine"], before["machine"]
+    dtype = info.get("dtype", "?")
+    lines = [
+        f"### {label(info)}, {dtype}",
+        "",
+        f"Before: commit {was.get('commit', '?')}, measured {_date(was)}; after: commit "
+        f"{info.get('commit', '?')}, measured {_date(info)}; jax {info.get('jax', '?')}. Time "
+        "per element of jaxlie_geo, and its speed-up over jaxlie measured in the same run.",
+        "",
+    ]
+    return lines + table(header, body, align) + [""]
+
+
 def _plain_ns(x: float) -> str:
     return f"{x:.0f}" if x >= 100 else f"{x:.1f}" if x >= 10 else f"{x:.2f}"
 
@@ -640,6 +705,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += machines_section(raw, order)
     lines += speed_section(raw, order)
     lines += jacobians_section(raw, order)
+    lines += change_section(raw, order)
     lines += accuracy_section(raw, order)
     while lines and lines[-1] == "":
         lines.pop()
