@@ -265,6 +265,21 @@ def test_in_chunks_equals_whole_batch(G, op, f, dtype, small_chunks):
     assert_close(stacked[1], f(*(a[::-1] for a in args)), dtype, 4)
 
 
+def _run_script(script: str) -> str:
+    """Run ``script`` in a new Python process on CPU (the device count is fixed at jax's
+    start), with ``GROUP_NAMES`` replaced by the names of the groups; its stdout."""
+    code = script.replace("GROUP_NAMES", repr([G.__name__ for G in GROUPS]))
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "JAX_PLATFORMS": "cpu"},
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    return out.stdout
+
+
 _SHARDED_SCRIPT = r"""
 import os, sys
 os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=4"
@@ -325,16 +340,8 @@ def test_chunked_ops_on_a_sharded_batch():
     batch on every device and returned it replicated. The result keeps the input's
     sharding, the program has no all-gather, values match one device's, and inside
     ``shard_map`` (each device's own shard) the chunks run again."""
-    code = _SHARDED_SCRIPT.replace("GROUP_NAMES", repr([G.__name__ for G in GROUPS]))
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env={**os.environ, "JAX_PLATFORMS": "cpu"},
-    )
-    assert out.returncode == 0, out.stderr[-3000:]
-    assert out.stdout.count(" ok") >= 4, out.stdout
+    stdout = _run_script(_SHARDED_SCRIPT)
+    assert stdout.count(" ok") >= 4, stdout
 
 
 _COLLECTIVES_SCRIPT = r"""
@@ -469,16 +476,7 @@ def test_elementwise_ops_on_a_sharded_batch_have_no_collectives():
     operand, the identity) are constants XLA places by its own rule (replicated or on one
     device), with no communication; they are exempt from the sharding check. Inside
     ``shard_map`` (each device its own shard), exp and log give one device's values."""
-    code = _COLLECTIVES_SCRIPT.replace("GROUP_NAMES", repr([G.__name__ for G in GROUPS]))
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env={**os.environ, "JAX_PLATFORMS": "cpu"},
-    )
-    assert out.returncode == 0, out.stderr[-3000:]
-    report = json.loads(out.stdout.strip().splitlines()[-1])
+    report = json.loads(_run_script(_COLLECTIVES_SCRIPT).strip().splitlines()[-1])
     assert report["collectives"] == {}, report["collectives"]
     assert report["sharding"] == {}, report["sharding"]
     assert report["shard_map"] == {}, report["shard_map"]
