@@ -54,8 +54,12 @@ rotations; rotations with Gaussian noise of 1e-6, 1e-3, 1e-1 and 0.3; Gaussian m
 reflections with noise 0.1; rank-2 matrices. Float32 and float64 alike: at most 2.0 ulp for
 the rotations and the noisy rotations, and at most 1.3 ulp · κ everywhere, κ =
 (d1 + d2 + d3)/(d2 + d3) the conditioning of the nearest rotation (Gaussian matrices: up to
-35 ulp in float32, 108 in float64). The quaternion of a rotation is within 2 ulp
-of jaxlie's (Shepperd's), and of mpmath's within 4 ulp at and near π (``tests``).
+35 ulp in float32, 108 in float64). (Measured with a two-stage form that sent rotations to
+a power iteration; for the Jacobi sweeps alone, float32 against numpy's float64 SVD
+projection, the quaternion's exact rotation matrix is within 1.66 ulp for 20 000
+rotations, 2.03 ulp with noise up to 0.1, and 2.59 ulp with noise 0.3.) The quaternion of
+a rotation is within 2 ulp of jaxlie's (Shepperd's), and of mpmath's within 4 ulp at and
+near π (``tests``).
 
 Speed (CPU, 2 cores, jit, 10⁶ matrices): the same for every input, rotations or not, about
 0.5 s in float32 and 0.75–1.4 s in float64 (timings on a shared machine); the Jacobi sweeps
