@@ -23,6 +23,8 @@ from ._geodesic import between as between
 from ._geodesic import geodesic as geodesic
 from ._se2 import SE2 as SE2
 from ._se3 import SE3 as SE3
+from ._se23 import SE23 as SE23
+from ._sim3 import Sim3 as Sim3
 from ._so2 import SO2 as SO2
 from ._so3 import SO3 as SO3
 from ._validity import check_valid as check_valid
@@ -40,6 +42,8 @@ __all__ = [
     "SE2",
     "SO3",
     "SE3",
+    "Sim3",
+    "SE23",
     "Geodesic",
     "geodesic",
     "between",

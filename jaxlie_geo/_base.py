@@ -492,8 +492,9 @@ class MatrixLieGroup(abc.ABC):
         e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3)."""
         n, d = cls.matrix_dim, cls.space_dim
         coords = [points[..., i] for i in range(d)]
-        if n > d:  # homogeneous coordinates
+        if n > d:  # homogeneous coordinates (p, 1, 0, …): SE_2(3)'s velocity column reads 0
             coords.append(jnp.ones_like(coords[0]))
+            coords.extend(jnp.zeros_like(coords[0]) for _ in range(n - d - 1))
         with jax.ensure_compile_time_eval():
             E = onp.asarray(cls.hat(onp.eye(cls.tangent_dim)))  # (k, n, n), entries 0 and ±1
 
@@ -766,3 +767,26 @@ def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
     if not -ndim <= axis < ndim:
         raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
     return G(jnp.stack([e.parameters() for e in elements], axis=axis % ndim))
+
+
+def block_matrix(rows: Sequence[Sequence[Optional[jax.Array]]]) -> jax.Array:
+    """A matrix from blocks, ``(*batch, n_i, m_j)`` each, ``None`` for a zero block (its
+    size read from the other blocks of its row and column); batch axes broadcast."""
+    heights = [next(b.shape[-2] for b in row if b is not None) for row in rows]
+    widths = [next(b.shape[-1] for b in col if b is not None) for col in zip(*rows)]
+    present = [b for row in rows for b in row if b is not None]
+    batch = jnp.broadcast_shapes(*(b.shape[:-2] for b in present))
+    dtype = jnp.result_type(*present)
+
+    def fill(b: Optional[jax.Array], h: int, w: int) -> jax.Array:
+        if b is None:
+            return jnp.zeros((*batch, h, w), dtype)
+        return jnp.broadcast_to(b.astype(dtype), (*batch, h, w))
+
+    return jnp.concatenate(
+        [
+            jnp.concatenate([fill(b, h, w) for b, w in zip(row, widths)], axis=-1)
+            for row, h in zip(rows, heights)
+        ],
+        axis=-2,
+    )

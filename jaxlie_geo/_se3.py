@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
+from ._alignment import umeyama_parts
 from ._base import SEBase
 from ._checks import as_float_array
 from ._pytree import pytree_dataclass
@@ -259,3 +260,37 @@ class SE3(SEBase[SO3]):
         first)."""
         xi = cls._check_tangent(tangent, "ad")
         return cls._blocks(skew(xi[..., 3:]), skew(xi[..., :3]))
+
+    # -- fitting --------------------------------------------------------------------
+
+    @classmethod
+    def align(
+        cls,
+        source: hints.Array,
+        target: hints.Array,
+        weights: Optional[hints.Array] = None,
+    ) -> SE3:
+        """The element T minimising Σ w ‖target − T @ source‖², in closed form (Umeyama,
+        IEEE TPAMI 13(4), 1991, eqs. 34–43 with the scale fixed to 1, the Kabsch
+        solution; ``jaxlie_geo._alignment.umeyama`` states the formulas, the degenerate
+        cases and the accuracy).
+
+        Args:
+            source: ``(*batch, N, 3)``, the points to be mapped.
+            target: ``(*batch, N, 3)``, their counterparts.
+            weights: ``(*batch, N)``, non-negative; None for uniform weights. A point of
+                zero weight is ignored.
+
+        Returns:
+            SE3 with batch axes ``batch`` (the broadcast batch axes of the arguments).
+            Degenerate data give one of the minimisers: for collinear points a rotation
+            about the line chosen by the projection onto the rotations, the identity
+            rotation where the covariance vanishes (coincident source or target points),
+            the identity for zero total weight.
+
+        Raises:
+            ValueError: at trace time, naming the argument and the shapes, for inputs not
+                of the shapes above.
+        """
+        r, t, _ = umeyama_parts(source, target, weights, False, "SE3.align")
+        return cls.from_rotation_and_translation(SO3.from_matrix(r), t)

@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 
 from . import hints
-from ._base import GroupT, MatrixLieGroup, SEBase
+from ._base import GroupT, MatrixLieGroup, SOBase
 from ._checks import as_float_array, check_batches
 from ._jit import jit_function
 from ._xla import aligned
@@ -117,7 +117,7 @@ def rminus(a: GroupT, b: GroupT) -> Tuple[jax.Array, jax.Array]:
     G = type(a)
     e = a._between(b)
     J_r_inv = e.jlog()  # the log is principal: the groups' faster jlog applies
-    if not isinstance(e, SEBase):  # rotation groups: J_l(τ) = J_r(τ)ᵀ
+    if isinstance(e, SOBase):  # rotation groups: J_l(τ) = J_r(τ)ᵀ
         return -jnp.swapaxes(J_r_inv, -1, -2), J_r_inv
     return -G.jac_left_inv(e.log()), J_r_inv
 
