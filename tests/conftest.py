@@ -65,7 +65,7 @@ from hypothesis import HealthCheck, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 import jaxlie_geo  # noqa: E402
-from jaxlie_geo import SE2, SE3, SO2, SO3  # noqa: E402
+from jaxlie_geo import SE2, SE3, SE23, SO2, SO3, Sim3  # noqa: E402
 
 # ---------------------------------------------------------------------------------
 # Hypothesis profiles.
@@ -114,7 +114,7 @@ def pytest_configure(config: pytest.Config) -> None:
 # ---------------------------------------------------------------------------------
 # The harness: every group, batch shape and dtype.
 
-GROUPS = [SO2, SE2, SO3, SE3]
+GROUPS = [SO2, SE2, SO3, SE3, Sim3, SE23]
 BATCHES: Sequence[Tuple[int, ...]] = [(), (3,), (2, 4)]
 DTYPES = [jnp.float32, jnp.float64]
 
@@ -254,27 +254,58 @@ GENERATORS: Dict[type, np.ndarray] = {
     SE3: np.stack(
         [_unit(4, 0, 3), _unit(4, 1, 3), _unit(4, 2, 3)] + [_embed(e, 4) for e in _so3_generators()]
     ),
+    # Sim(3): (v, ω, σ), [[ω̂ + σI, v], [0, 0]]
+    Sim3: np.stack(
+        [_unit(4, 0, 3), _unit(4, 1, 3), _unit(4, 2, 3)]
+        + [_embed(e, 4) for e in _so3_generators()]
+        + [_embed(np.eye(3), 4)]
+    ),
+    # SE_2(3): (ρ, ω, ν), [[ω̂, ρ, ν], [0, 0, 0], [0, 0, 0]]
+    SE23: np.stack(
+        [_unit(5, i, 3) for i in range(3)]
+        + [_embed(e, 5) for e in _so3_generators()]
+        + [_unit(5, i, 4) for i in range(3)]
+    ),
 }
 """``GENERATORS[G][k]`` is the Lie-algebra matrix of the k-th tangent coordinate."""
 
-# (rotation slice, translation slice) of each group's tangent; ``None`` where absent.
+# (rotation slice, the other tangent coordinates) of each group; ``None`` where absent.
 LAYOUT: Dict[type, Tuple[slice, Any]] = {
     SO2: (slice(0, 1), None),
-    SE2: (slice(2, 3), slice(0, 2)),
+    SE2: (slice(2, 3), [0, 1]),
     SO3: (slice(0, 3), None),
-    SE3: (slice(3, 6), slice(0, 3)),
+    SE3: (slice(3, 6), [0, 1, 2]),
+    Sim3: (slice(3, 6), [0, 1, 2]),
+    SE23: (slice(3, 6), [0, 1, 2, 6, 7, 8]),
 }
 
 
+SCALE_INDEX: Dict[type, int] = {Sim3: 6}
+"""The tangent coordinate of the log-scale σ, for the groups that have one. Random tangents
+draw it from N(0, 1), whatever the translation's scale (e^σ must stay finite)."""
+
+
 def is_se(G: type) -> bool:
-    """Whether ``G`` has a translation part (a semidirect product SE(n))."""
+    """Whether ``G`` is a rotation-and-translation group SE(n) (``SEBase``: the
+    ``from_rotation_and_translation`` and ``translation()`` interface)."""
+    return issubclass(G, jaxlie_geo.SEBase)
+
+
+def has_translation(G: type) -> bool:
+    """Whether ``G``'s tangent has coordinates besides the rotation (every group but SO(n))."""
     return LAYOUT[G][1] is not None
+
+
+def has_scale(G: type) -> bool:
+    """Whether a generator has a nonzero trace (Sim(3)'s scale): the linear block of the
+    matrix is then s R rather than a rotation."""
+    return any(np.trace(E) != 0 for E in GENERATORS[G])
 
 
 def rotation_params(G: type) -> int:
     """How many leading parameters hold the rotation: 2 (a unit complex number) or 4 (a unit
-    quaternion); the translation, if any, follows."""
-    return G.parameters_dim - (G.space_dim if is_se(G) else 0)
+    quaternion); the rest (translation, velocity, log-scale), if any, follows."""
+    return 2 if G.space_dim == 2 else 4
 
 
 def is_abelian(G: type) -> bool:
@@ -300,6 +331,24 @@ over_se_groups = pytest.mark.parametrize("G", SE_GROUPS, ids=group_name)
 over_quaternion_groups = pytest.mark.parametrize("G", QUATERNION_GROUPS, ids=group_name)
 """Parametrise over ``QUATERNION_GROUPS`` (argument ``G``)."""
 over_non_abelian_groups = pytest.mark.parametrize("G", NON_ABELIAN_GROUPS, ids=group_name)
+
+
+def _in_jaxlie(G: type) -> bool:
+    import jaxlie  # the test extra installs it
+
+    return hasattr(jaxlie, G.__name__)
+
+
+JAXLIE_GROUPS = [G for G in GROUPS if _in_jaxlie(G)]
+"""The groups jaxlie 1.5 also has (the side-by-side and interop tests); the others have
+no counterpart there (``interop.to_jaxlie`` raises ``TypeError`` for them)."""
+over_jaxlie_groups = pytest.mark.parametrize("G", JAXLIE_GROUPS, ids=group_name)
+"""Parametrise over ``JAXLIE_GROUPS`` (argument ``G``)."""
+over_jaxlie_groups_dtypes = pytest.mark.parametrize(
+    ("G", "dtype"),
+    [pytest.param(G, d, id=f"{G.__name__}-{dtype_name(d)}") for G in JAXLIE_GROUPS for d in DTYPES],
+)
+"""Parametrise over ``JAXLIE_GROUPS`` × dtype (arguments ``G, dtype``)."""
 """Parametrise over ``NON_ABELIAN_GROUPS`` (argument ``G``)."""
 
 
@@ -344,11 +393,13 @@ def rotation_angle(G: type, tangent: Any) -> np.ndarray:
 
 
 def homogeneous_apply(G: type, M: Any, p: Any) -> np.ndarray:
-    """Action of a group matrix on points, in numpy: ``M p`` (SO) or ``(M [p; 1])[:n]`` (SE)."""
+    """Action of a group matrix on points, in numpy: ``M p`` (SO) or ``(M [p; 1; 0…])[:n]``."""
     M, p = to_np(M), to_np(p)
-    if is_se(G):
-        n = p.shape[-1]
-        ph = np.concatenate([p, np.ones((*p.shape[:-1], 1))], axis=-1)
+    n, m = p.shape[-1], G.matrix_dim
+    if m > n:  # homogeneous (p, 1, 0, …): SE_2(3)'s velocity column does not act
+        pad = np.zeros((*p.shape[:-1], m - n))
+        pad[..., 0] = 1.0
+        ph = np.concatenate([p, pad], axis=-1)
         return np.einsum("...ij,...j->...i", M, ph)[..., :n]
     return np.einsum("...ij,...j->...i", M, p)
 
@@ -410,7 +461,9 @@ def random_tangent(
     out = np.zeros((*batch, G.tangent_dim))
     out[..., rot] = direction * angle[..., None]
     if trans is not None:
-        out[..., trans] = trans_scale * rng.normal(size=(*batch, trans.stop - trans.start))
+        out[..., trans] = trans_scale * rng.normal(size=(*batch, len(trans)))
+    if G in SCALE_INDEX:
+        out[..., SCALE_INDEX[G]] = rng.normal(size=batch)
     return out.astype(dtype)
 
 
@@ -437,7 +490,9 @@ def special_tangents(G: type, dtype: Any) -> jax.Array:
     for i, (a, s) in enumerate(zip(angles, tscales)):
         out[i, rot] = a * axis
         if trans is not None:
-            out[i, trans] = s * np.linspace(1.0, -0.5, trans.stop - trans.start)
+            out[i, trans] = s * np.linspace(1.0, -0.5, len(trans))
+    if G in SCALE_INDEX:  # σ: exactly 0, tiny, and moderate of both signs
+        out[:, SCALE_INDEX[G]] = [0.0, 1e-12, 0.5, 0.0, -0.7, 2.0, -1e-9]
     return out.astype(dtype)
 
 
@@ -471,6 +526,9 @@ __all__ = [
     "over_se_groups",
     "over_quaternion_groups",
     "over_non_abelian_groups",
+    "JAXLIE_GROUPS",
+    "over_jaxlie_groups",
+    "over_jaxlie_groups_dtypes",
     "tol",
     "assert_close",
     "assert_close_compat",
@@ -479,6 +537,9 @@ __all__ = [
     "GENERATORS",
     "LAYOUT",
     "is_se",
+    "has_translation",
+    "has_scale",
+    "SCALE_INDEX",
     "rotation_params",
     "is_abelian",
     "identity_matrices",

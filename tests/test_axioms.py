@@ -21,10 +21,10 @@ from conftest import (
     assert_close,
     assert_rel_norm,
     expm_ref,
+    has_scale,
     hat_ref,
     homogeneous_apply,
     identity_matrices,
-    is_se,
     over_cases,
     over_groups_dtypes,
     random_element,
@@ -187,15 +187,16 @@ def test_matrix_round_trip(G, batch, dtype, seed):
     back = G.from_matrix(M)
     assert back.parameters().dtype == dtype and back.get_batch_axes() == batch
     assert_close(back.as_matrix(), M, dtype, 2)
-    # The matrix is a rigid motion: orthonormal rotation block, det +1, homogeneous row.
+    # The matrix is a rigid motion (a similarity for Sim(3)): its linear block is s R with
+    # R orthonormal, det R = +1 and s = 1 unless the group has a scale; the rows below
+    # are the identity's.
     n = G.space_dim
-    R = to_np(M)[..., :n, :n]
+    A = to_np(M)[..., :n, :n]
+    s = np.cbrt(np.linalg.det(A)) if has_scale(G) else np.ones(batch)
+    R = A / s[..., None, None]
     assert_close(np.swapaxes(R, -1, -2) @ R, identity_matrices(G, batch)[..., :n, :n], dtype, 2)
     assert_close(np.linalg.det(R), np.ones(batch), dtype, 2)
-    if is_se(G):
-        bottom = np.zeros((*batch, n + 1))
-        bottom[..., n] = 1.0
-        np.testing.assert_array_equal(to_np(M)[..., n, :], bottom)
+    np.testing.assert_array_equal(to_np(M)[..., n:, :], identity_matrices(G, batch)[..., n:, :])
 
 
 @over_cases
@@ -228,12 +229,16 @@ def test_hat_vee(G, batch, dtype, seed):
 @over_cases
 @given(seed=seeds)
 def test_vee_ignores_symmetric_part_of_rotation_block(G, batch, dtype, seed):
-    """vee reads the generator coefficients (documented: the symmetric part is ignored)."""
+    """vee reads the generator coefficients (documented: the symmetric part is ignored; for
+    Sim(3), whose σI is symmetric, the traceless symmetric part)."""
     x = random_tangent(G, seed, batch, dtype)
     n = G.space_dim
     A = np.random.default_rng(seed).normal(size=(*batch, n, n))
     S = np.zeros((*batch, G.matrix_dim, G.matrix_dim))
     S[..., :n, :n] = A + np.swapaxes(A, -1, -2)
+    if has_scale(G):
+        trace = np.trace(S[..., :n, :n], axis1=-2, axis2=-1)
+        S[..., :n, :n] -= trace[..., None, None] / n * np.eye(n)
     X = (hat_ref(G, x) + S).astype(dtype)
     assert_close(G.vee(X), vee_ref(G, X), dtype)
     assert_close(G.vee(X), x, dtype, 4)

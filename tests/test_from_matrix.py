@@ -123,8 +123,9 @@ def _min_distance(M):
 
 
 def _rotation_block(G, T):
-    n = G.space_dim
-    return to_np(T.as_matrix())[..., :n, :n]
+    """The rotation matrix of an element: its own, or its ``rotation()``'s (the SE groups,
+    Sim3 (without the scale) and SE23)."""
+    return to_np((T.rotation() if hasattr(T, "rotation") else T).as_matrix())
 
 
 def _err(got, want, dtype):
@@ -139,8 +140,8 @@ def _noisy(G, noise, dtype, seed, count=500):
     n, rng = G.space_dim, np.random.default_rng(seed)
     A = _rotations(n, count, seed) + noise * rng.normal(size=(count, n, n))
     M = A
-    if is_se(G):
-        M = rng.normal(size=(count, n + 1, n + 1))
+    if G.matrix_dim > n:
+        M = rng.normal(size=(count, G.matrix_dim, G.matrix_dim))
         M[:, :n, :n] = A
     M = M.astype(dtype)
     return M, M[:, :n, :n].astype(np.float64)
@@ -395,7 +396,9 @@ def test_derivative_matches_the_svd_projection(G):
         M = jnp.asarray(M)
 
         def f(m):
-            return G.from_matrix(m).as_matrix()[:n, :]
+            T = G.from_matrix(m)
+            R = T.rotation() if hasattr(T, "rotation") else T
+            return jnp.concatenate([R.as_matrix(), T.as_matrix()[:n, n:]], axis=-1)
 
         want = jax.jacfwd(_svd_nearest_jax)(M[:n, :n])
         outside = np.ones((N, N), bool)

@@ -6,13 +6,22 @@ import jax
 import jax.numpy as jnp
 import jaxlie
 import numpy as np
-from conftest import GROUPS, over_groups_dtypes, random_element, random_points, to_np
+import pytest
+from conftest import (
+    GROUPS,
+    JAXLIE_GROUPS,
+    group_name,
+    over_jaxlie_groups_dtypes,
+    random_element,
+    random_points,
+    to_np,
+)
 
 import jaxlie_geo
 from jaxlie_geo.interop import from_jaxlie, to_jaxlie
 
 
-@over_groups_dtypes
+@over_jaxlie_groups_dtypes
 def test_round_trip_keeps_parameters_bit_for_bit(G, dtype):
     """``to_jaxlie`` and ``from_jaxlie`` give the other library's class with the same batch,
     dtype and parameters, bit for bit."""
@@ -27,7 +36,7 @@ def test_round_trip_keeps_parameters_bit_for_bit(G, dtype):
     assert back.parameters().dtype == dtype
 
 
-@over_groups_dtypes
+@over_jaxlie_groups_dtypes
 def test_jaxlie_computes_the_same_transform(G, dtype):
     """A library that only knows jaxlie acts with our pose as we do."""
     T = random_element(G, 5, (4,), dtype)
@@ -42,7 +51,7 @@ def test_jaxlie_computes_the_same_transform(G, dtype):
 def test_pytrees_and_jit():
     """Both conversions map over pytrees (leaving other leaves alone) and run under jit."""
     tree = {
-        "poses": [random_element(G, i, (2,), jnp.float64) for i, G in enumerate(GROUPS)],
+        "poses": [random_element(G, i, (2,), jnp.float64) for i, G in enumerate(JAXLIE_GROUPS)],
         "weight": jnp.arange(3.0),
         "name_free": (1.5, None),
     }
@@ -76,3 +85,13 @@ def test_round_trip_keeps_negative_zeros():
                 np.asarray(back).view(np.uint32 if p.dtype == np.float32 else np.uint64),
                 p.view(np.uint32 if p.dtype == np.float32 else np.uint64),
             )
+
+
+@pytest.mark.parametrize("G", [G for G in GROUPS if G not in JAXLIE_GROUPS], ids=group_name)
+def test_groups_without_a_jaxlie_counterpart_raise(G):
+    """jaxlie has no Sim(3) or SE_2(3): ``to_jaxlie`` names the group in a ``TypeError``,
+    also inside a pytree, rather than converting it to something else."""
+    T = G.identity()
+    for tree in (T, {"a": [T]}):
+        with pytest.raises(TypeError, match=f"no counterpart of {G.__name__}"):
+            to_jaxlie(tree)

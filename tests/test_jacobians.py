@@ -48,9 +48,9 @@ from conftest import (
     GENERATORS,
     GROUPS,
     LAYOUT,
+    SCALE_INDEX,
     dtype_name,
     hat_ref,
-    is_se,
     over_groups_dtypes,
     over_non_abelian_groups,
     to_np,
@@ -122,8 +122,10 @@ def _cases(G: type, dtype_name: str) -> Tuple[np.ndarray, List[Tuple[str, float]
                 d = rng.normal(size=rot_dim)
                 x[rot] = angle * d / np.linalg.norm(d)
                 if trans is not None:
-                    t = rng.normal(size=trans.stop - trans.start)
+                    t = rng.normal(size=len(trans))
                     x[trans] = size * t / np.linalg.norm(t)
+                if G in SCALE_INDEX:
+                    x[SCALE_INDEX[G]] = rng.normal()
                 rows.append(x)
                 meta.append((regime, size))
     X = _flush(np.asarray(rows).astype(dtype_name))
@@ -560,7 +562,9 @@ def test_generator_action(G, dtype):
     p = jnp.asarray(np.random.default_rng(15).normal(size=(5, G.space_dim)), dtype)
     got = to_np(jacobians.generator_action(G, p))
     ph = to_np(p)
-    if is_se(G):
-        ph = np.concatenate([ph, np.ones((5, 1))], axis=-1)
+    if G.matrix_dim > G.space_dim:  # homogeneous (p, 1, 0, …)
+        pad = np.zeros((5, G.matrix_dim - G.space_dim))
+        pad[:, 0] = 1.0
+        ph = np.concatenate([ph, pad], axis=-1)
     want = np.einsum("kij,bj->bik", GENERATORS[G], ph)[:, : G.space_dim, :]
     np.testing.assert_allclose(got, want, **_tol(dtype, 1))

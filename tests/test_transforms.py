@@ -271,7 +271,7 @@ def _delicate_tangents(G, dtype):
     out.append(tiny)
     if is_se(G):
         pure = np.zeros(G.tangent_dim)
-        pure[trans] = np.linspace(1.0, 2.0, trans.stop - trans.start)
+        pure[trans] = np.linspace(1.0, 2.0, len(trans))
         out.append(pure)
         big = pure * 100.0
         out.append(big)
