@@ -279,12 +279,15 @@ class Sim3(MatrixLieGroup):
         def translation(w_: jax.Array, sigma_: jax.Array) -> jax.Array:
             return _w_apply(_scalar.sim3_coefficients(sigma_, sq_norm(w_)), w_, v)
 
-        cols = []
-        for j in range(4):
-            dw = jnp.zeros_like(w) if j == 3 else jnp.zeros_like(w).at[..., j].set(1.0)
-            ds = jnp.ones_like(sigma) if j == 3 else jnp.zeros_like(sigma)
-            cols.append(jax.jvp(translation, (w, sigma), (dw, ds))[1])
-        D = jnp.stack(cols, axis=-1)  # (*batch, 3, 4)
+        # the four directions (e_x, e_y, e_z, e_σ) in one vmapped JVP: one program, not four
+        eye = jnp.eye(4, dtype=xi.dtype)
+        dw = jnp.broadcast_to(
+            eye[:, None, :3].reshape((4,) + (1,) * (w.ndim - 1) + (3,)), (4, *w.shape)
+        )
+        ds = jnp.broadcast_to(eye[:, 3].reshape((4,) + (1,) * sigma.ndim), (4, *sigma.shape))
+        D = jax.vmap(lambda a, b: jax.jvp(translation, (w, sigma), (a, b))[1], out_axes=-1)(
+            dw, ds
+        )  # (*batch, 3, 4)
         Rt = SO3(exp_quaternion(-w)).as_matrix()
         D = jnp.exp(-sigma)[..., None, None] * matmul(Rt, D)
         return W_neg, D[..., :3], D[..., 3:]

