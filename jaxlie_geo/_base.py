@@ -211,8 +211,9 @@ class MatrixLieGroup(abc.ABC):
 
     def is_valid(self, atol: Optional[hints.Scalar] = None) -> jax.Array:
         """Whether each element is a group element: all its parameters are finite and its
-        rotation part (the unit complex number of SO2/SE2, the unit quaternion of SO3/SE3)
-        has a norm within ``atol`` of 1. Constructors do not check this; use it (or
+        rotation part (the unit complex number of SO2/SE2, the unit quaternion of SO3, SE3,
+        Sim3 and SE23) has a norm within ``atol`` of 1 (Sim3's scale e^σ is positive for
+        every finite log-scale σ). Constructors do not check this; use it (or
         ``check_valid`` under ``jax.experimental.checkify``) on parameters that come from
         outside the group operations: an optimiser's additive update, a file, a cast.
 

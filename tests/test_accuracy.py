@@ -1,9 +1,14 @@
 """exp, log and the derivatives of log∘exp of every group against mpmath, in ulp.
 
 Grid: rotation angle regimes {exactly 0, 1e-30…1e-6, 1e-5…0.1, 0.1…3, π−1e-2…π−1e-7
-(float32: …π−2e-6), and for exp only π…10π and 10π…1e4} × translation norms {0, 1e-6, 1, 1e3} (SE2,
-SE3) × {float32, float64} × {SO2, SE2, SO3, SE3}, N_PER random samples per cell (fixed
-seed; the band end points are always included).
+(float32: …π−2e-6), and for exp only π…10π and 10π…1e4} × translation norms {0, 1e-6, 1, 1e3}
+(SE2, SE3, Sim3, SE23; SE23's velocity norm cycles through the same four within each cell)
+× {float32, float64} × {SO2, SE2, SO3, SE3, Sim3, SE23}, N_PER random samples per cell
+(fixed seed; the band end points are always included). Sim3's log-scale σ is 0 at θ = 0
+and 1e-3 ≤ |σ| ≤ 3 elsewhere, and Sim3 has six regimes of its own, joint in θ and σ: θ = 0
+with 1e-8 ≤ |σ| ≤ 20; σ = 0 or 1e-30 ≤ |σ| ≤ 1e-4 at 0.1 ≤ θ ≤ 3.1; θ = r√ρ, |σ| = r/√ρ
+for r ∈ {1e-3, 1e-5, 1e-8} and θ/|σ| = ρ from 1e-3 to 1e3 with both signs of σ; and
+3 ≤ |σ| ≤ 20 at 1e-8 ≤ θ ≤ π − 1e-3 (``M._angles_sigmas``).
 
 Measure (tests/_mpref.py has the details and the references): per output block,
 ulp_err = ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)), the reference computed in mpmath at 60
@@ -12,9 +17,10 @@ does); log's input is a stored group element (the exact exp rounded to the dtype
 reference is the principal log of exactly that element. Bounds (``M.bound``): exp and
 log ≤ 4 ulp, exp beyond π ≤ 4 + |θ|/2 ulp (the conditioning of its input);
 d log(exp(x))/dx within 8 ulp of I and d² log(exp(x))/dx² within 64 ulp of 0, with the
-∂v/∂ω (and ∂²v/∂ω²) blocks scaled by max(1, ‖v‖); derivatives only where the angle is
-below π. Any non-finite value fails. float32 runs with jax_enable_x64 off (no silent
-promotion can hide float32 rounding) and, for exp and log, also with it on.
+entries of an output vector differentiated by ω (Sim3: also by σ) scaled by max(1, ‖v‖) of
+that vector; derivatives only where the angle is below π. Any non-finite value fails.
+float32 runs with jax_enable_x64 off (no silent promotion can hide float32 rounding) and,
+for exp and log, also with it on.
 
 `python benchmarks/accuracy.py` prints the same measurement as a table, next to jaxlie.
 """
@@ -82,12 +88,34 @@ def test_measure_is_exact():
         assert np.allclose(e, 1.0, rtol=1e-6), (e.min(), e.max())
 
 
+def test_sim3_grid_covers_the_joint_regimes():
+    """Sim3's grid holds what its regimes promise: θ = |σ| = r and θ/|σ| from 1e-3 to 1e3 at
+    r = 1e-3, 1e-5, 1e-8 with both signs of σ, σ = 0 and |σ| = 20 of both signs, θ = 0
+    with σ ≠ 0, and θ within 1e-5 of π."""
+    for dtype in M.DTYPES:
+        c = _cases("Sim3", dtype)
+        th, sg = c.theta, c.sigma
+        for name, r in M.JOINT_SCALE.items():
+            m = c.regime == name
+            ratio = th[m] / np.abs(sg[m])
+            assert np.isclose(ratio.min(), 1e-3, rtol=1e-5) and np.isclose(
+                ratio.max(), 1e3, rtol=1e-5
+            )
+            both = np.isclose(th[m], r, rtol=1e-6) & np.isclose(np.abs(sg[m]), r, rtol=1e-6)
+            assert set(np.sign(sg[m][both])) == {-1.0, 1.0}
+        assert set(np.sign(sg[np.abs(sg) == 20.0])) == {-1.0, 1.0}
+        small = sg[c.regime == "sigma_small"]
+        assert np.count_nonzero(small == 0.0) >= 2 * len(M.SIZES)
+        assert np.any((th == 0.0) & (np.abs(sg) > 0.0))
+        assert np.pi - th[c.regime == "near_pi"].max() < 1e-5
+
+
 CELLS = [
     (g, op, dt, r)
     for g in M.GROUPS
     for op in M.OPS
     for dt in M.DTYPES
-    for r in M.REGIMES
+    for r in M.regimes(g)
     if op in M.OPS_IN_REGIME[r]
 ]
 
