@@ -7,6 +7,8 @@ The raw results are JSON files, one per machine and table::
     benchmarks/raw/<machine>/speed-float64.json      run.py --dtype float64 --save
     benchmarks/raw/<machine>/jacobians-float32.json  jacobians.py --save
     benchmarks/raw/<machine>/accuracy.json           accuracy.py --save
+    benchmarks/raw/<machine>/extended-groups-<dtype>.json
+                                                     extended_groups.py --save
     benchmarks/raw/<machine>/baseline-speed-<dtype>.json
                                                      run.py --json of an earlier commit,
                                                      with a "change" entry: the page shows
@@ -365,9 +367,12 @@ def machines_section(raw: dict, order: list) -> list:
 
 
 def _kind_text(kind: str) -> str:
-    """``speed-float32`` -> ``speed (float32)``."""
-    name, _, dtype = kind.partition("-")
-    return f"{name} ({dtype})" if dtype else name
+    """``speed-float32`` -> ``speed (float32)``, ``extended-groups-float32`` -> ``extended
+    groups (float32)``."""
+    name, _, dtype = kind.rpartition("-")
+    if dtype not in ("float32", "float64"):
+        return kind
+    return f"{name.replace('-', ' ')} ({dtype})"
 
 
 def speed_section(raw: dict, order: list) -> list:
@@ -567,6 +572,126 @@ def _jacobian_table(data: dict) -> list:
     return lines
 
 
+EXTENDED_OPS = ("exp", "log", "compose", "apply", "jac_right", "grad")
+EXTENDED_GROUPS = ("Sim3", "SE23")
+
+EXTENDED_METHOD = """\
+Method (`extended_groups.py`): jaxlie has neither group, so each operation is timed against
+the matrix computation that defines it, written with jax alone: exp against
+`vmap(jax.scipy.linalg.expm)(G.hat(ξ))`; compose against `A @ B`, the 4×4 (Sim3) or 5×5
+(SE23) matrices from `as_matrix()`; apply against the matrix times the homogeneous point
+(x, 1), or (x, 1, 0) for SE23; `G.jac_right(ξ)` against its definition J_r(ξ)δ = vee(E⁻¹ ·
+d/dε expm(hat(ξ + εδ))), E = expm(hat ξ), one `jax.jvp` through expm per tangent direction
+and E⁻¹ by `jnp.linalg.inv`. jax has no matrix logarithm, so `T.log()` and the gradient of
+Σ‖log(exp ξ)‖² are ours alone, checked against the identities log(exp ξ) = ξ and gradient
+2ξ; every other output is checked against its reference (max |Δ| / (1 + |ref|) below 1e-3 in
+float32, 1e-8 in float64, unless listed). The references of compose and apply get the
+matrices, computed before timing; those of exp and compose return matrices where ours return
+parameters. Inputs: standard normal tangents with rotation angles uniform in (0, 2.8) rad,
+Sim3's log-scale uniform in (−1, 1); elements are exp of such tangents. Timing is `run.py`'s:
+one jitted call on the whole batch, inputs on the device, interleaved repetitions (at least
+3, or 2 where a call takes over 5 s; each about 10 ms, or a tenth of the slower side's call
+up to 1 s, or one call), median time per call
+divided by N; speed-up = the reference's time / ours (median of the paired ratios, IQR in
+brackets); compile time is one trace + lower + XLA compile. A reference whose compiled
+program needs more than 80% of the available memory is compiled but not run. Under `vmap`,
+expm's branches on the matrix norm (Padé degree, number of squarings) become selects, so
+every element pays every Padé degree and all 16 squarings.\
+"""
+
+
+def extended_section(raw: dict, order: list) -> list:
+    found = [
+        raw[m][f"extended-groups-{dt}"]
+        for m in order
+        for dt in ("float32", "float64")
+        if f"extended-groups-{dt}" in raw[m]
+    ]
+    if not found:
+        return []
+    lines = ["## Sim(3) and SE₂(3) against matrix references", ""]
+    lines += EXTENDED_METHOD.splitlines() + [""]
+    for data in found:
+        lines += _extended_table(data)
+    return lines
+
+
+def _extended_table(data: dict) -> list:
+    info, res = data["machine"], data["results"]
+    dtype = info.get("dtype", res[0].get("dtype", "?"))
+    key = lambda r: (EXTENDED_GROUPS.index(r["group"]), EXTENDED_OPS.index(r["op"]), r["n"])
+    body = []
+    for r in sorted(res, key=key):
+        ref = r["ratio"] is not None
+        speed = f"{r['ratio']:.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]" if ref else "–"
+        if ref and _slower(r):
+            speed = f"**{speed}**"
+        compile_ref = f"{r['compile_ref_ms']:.0f}" if ref else "–"
+        if r.get("compile_ref_ms") is not None:
+            compile_ref = f"{r['compile_ref_ms']:.0f}"
+        body.append(
+            [
+                r["group"],
+                r["op"],
+                pretty_n(r["n"]),
+                fmt_ns(r["ours_ns_per_elem"]),
+                fmt_ns(r["ref_ns_per_elem"])
+                if ref
+                else "–"
+                if r["reference"] is None
+                else "not run ¹",
+                speed,
+                f"{r['compile_ours_ms']:.0f} / {compile_ref}",
+            ]
+        )
+    header = ["group", "op", "N", "ours", "reference", "speed-up", "compile ms, ours / reference"]
+    lines = [
+        f"### {label(info)}, {dtype}",
+        "",
+        f"jax {info.get('jax', '?')}, measured {_date(info)}. Times per element; **bold**: "
+        "ours slower, with the whole IQR below 1.",
+        "",
+    ]
+    lines += table(header, body, "lllrrrr") + [""]
+    tol = 1e-3 if dtype == "float32" else 1e-8
+    slower = [r for r in res if r["ratio"] is not None and _slower(r)]
+    notes = []
+    if slower:
+        notes.append(
+            "Slower than the reference: "
+            + ", ".join(
+                f"{r['group']} {r['op']} at {_n_at(r['n'])} ({r['ratio']:.2f})" for r in slower
+            )
+            + "."
+        )
+    not_run = [r for r in res if r["ratio"] is None and r["reference"] is not None]
+    if not_run:
+        notes.append(
+            "¹ Reference compiled but not run, its program larger than 80% of the memory "
+            "available: "
+            + ", ".join(
+                f"{r['group']} {r['op']} at {_n_at(r['n'])} ({r['memory_ref_mb'] / 1e3:.1f} GB)"
+                for r in not_run
+            )
+            + "."
+        )
+    checked = [r for r in res if r["max_rel_diff"] is not None]
+    differ = [r for r in checked if not r["max_rel_diff"] < tol]
+    worst = max((r["max_rel_diff"] for r in checked), default=float("nan"))
+    if differ:
+        notes.append(
+            f"Outputs differ beyond {tol:g} (max |Δ| / (1 + |ref|)): "
+            + ", ".join(
+                f"{r['group']} {r['op']} at {_n_at(r['n'])} ({r['max_rel_diff']:.2g})"
+                for r in differ
+            )
+            + "."
+        )
+    else:
+        notes.append(f"Largest difference from the references and identities: {worst:.1e}.")
+    return lines + [f"- {note}" for note in notes] + [""]
+
+
 def change_section(raw: dict, order: list) -> list:
     """Before and after a change: a baseline run of an earlier commit (``baseline-speed-*``,
     with its ``change`` entry) beside today's run on the same machine."""
@@ -652,7 +777,7 @@ def _accuracy_tables(data: dict) -> list:
         )
         for c in data["cells"]
     }
-    groups = [g for g in GROUPS if any(k[1] == g for k in cells)]
+    groups = [g for g in data.get("groups", GROUPS) if any(k[1] == g for k in cells)]
     dtypes = [d for d in ("float32", "float64") if any(k[3] == d for k in cells)]
     lines = [
         f"### {label(info)}",
@@ -684,6 +809,8 @@ def _accuracy_tables(data: dict) -> list:
         lines += table(header, body, "ll" + "r" * len(data["regimes"])) + [""]
     for note in data.get("notes", []):
         lines += [note, ""]
+    for section in data.get("sections", []):  # Markdown tables accuracy.py renders itself
+        lines += [f"**{section['title']}**", "", *section["lines"], ""]
     return lines
 
 
@@ -705,6 +832,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += machines_section(raw, order)
     lines += speed_section(raw, order)
     lines += jacobians_section(raw, order)
+    lines += extended_section(raw, order)
     lines += change_section(raw, order)
     lines += accuracy_section(raw, order)
     while lines and lines[-1] == "":

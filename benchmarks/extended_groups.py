@@ -1,0 +1,528 @@
+#!/usr/bin/env python
+"""Speed of Sim3 and SE23 against references built from their matrices.
+
+jaxlie has neither group, so each closed form is timed against the matrix computation that
+defines it, built from jax alone (``G.hat`` and ``as_matrix`` only assemble matrices):
+
+  op         ours (jaxlie_geo)                 matrix reference
+  exp        G.exp(xi)                         vmap(jax.scipy.linalg.expm)(G.hat(xi))
+  log        T.log() (T precomputed)           none: jax has no matrix logarithm
+  compose    a @ b                             A @ B, the 4×4 (Sim3) or 5×5 (SE23) matrices
+  apply      T @ points                        M @ (x, 1) (Sim3), M @ (x, 1, 0) (SE23)
+  jac_right  G.jac_right(xi)                   vee(E⁻¹ ∂E/∂ξ_k) per column k, E = expm(hat ξ),
+                                               ∂E/∂ξ_k by jax.jvp through expm, E⁻¹ by
+                                               jnp.linalg.inv, vmapped over the batch
+  grad       jax.grad of Σ‖log(exp(ξ))‖²       none (it needs a matrix logarithm)
+
+The reference side of compose and apply gets the matrices of the same elements, computed
+before timing; its output is a matrix (exp, compose) where ours is the parameter vector.
+Inputs: tangents standard normal, rotation angles uniform in (0, 2.8) rad about random axes;
+Sim3's log-scale σ uniform in (−1, 1); elements are exp of such tangents; points standard
+normal. Every output is checked outside the timing, in the timed dtype, against the
+reference (exp and compose through ``as_matrix``) and, where there is none, against the
+identities log(exp ξ) = ξ and ∇Σ‖log(exp ξ)‖² = 2ξ (angles stay below π); the column
+``max rel diff`` is max |ours − reference| / (1 + |reference|).
+
+Timing follows ``benchmarks/run.py`` (its helpers are imported): every function is jitted
+and compiled ahead (trace + lower + XLA compile, reported per side), inputs are on the
+device, every call blocks until its result is ready; repetitions of the two sides are
+interleaved (ours then the reference, then the reference then ours, ...), each about 10 ms
+(a tenth of the slower side's call, up to 1 s, where that is longer) or one call; the time
+per element is the median over repetitions divided by N, the speed-up reference / ours the
+median of the paired per-repetition ratios with their inter-quartile range. The references
+are slow (expm ~10 µs per 4×4 matrix on a CPU core), so the number of repetitions is chosen
+within a time budget per case, at least 3, or 2 where a call takes more than 5 s (the
+references of exp and jac_right at 10^6). A reference whose compiled program (arguments,
+output, temporaries, from XLA's buffer assignment) would take more than 80% of the available
+memory is compiled but not run: jac_right's reference differentiates expm through all its
+branches and needs ~13 GB at N = 10^6 for SE23 in float32. The raw file records both sides'
+footprints (``memory_*_mb``).
+
+With --save the results replace raw/<machine>/extended-groups-<dtype>.json and the results
+page (RESULTS.md) is regenerated (report.py).
+
+Usage:
+  python benchmarks/extended_groups.py                    # float32, N = 10^3 and 10^6
+  python benchmarks/extended_groups.py --save             # ... saved, page regenerated
+  python benchmarks/extended_groups.py --dtype float64    # float64 (enables jax x64)
+  python benchmarks/extended_groups.py --quick            # smoke test: N = 100, 3 repeats
+  python benchmarks/extended_groups.py --groups SE23 --ops exp,jac_right --sizes 1000
+
+On a 2-core CPU the default float32 run takes about 5 minutes, most of it in the
+references at N = 10^6 (jac_right's reference takes 15-35 s per call there, exp's ~10 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import statistics
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
+from jax.scipy.linalg import expm
+from report import add_save_arguments, fmt_n, fmt_ns, save
+
+GROUPS = ("Sim3", "SE23")
+OPS = ("exp", "log", "compose", "apply", "jac_right", "grad")
+
+# Tangent layout: rotation vector at 3:6 in both; Sim3's log-scale at 6; the homogeneous
+# coordinates a point is completed with for the matrix reference of apply.
+GROUP_INFO = {
+    "Sim3": dict(tangent_dim=7, rot=slice(3, 6), scale=6, homogeneous=(1.0,)),
+    "SE23": dict(tangent_dim=9, rot=slice(3, 6), scale=None, homogeneous=(1.0, 0.0)),
+}
+
+# The expressions, as the raw file records them (report.py prints its own method text).
+REFERENCES = {
+    "exp": "vmap(jax.scipy.linalg.expm)(G.hat(xi))",
+    "log": None,
+    "compose": "A @ B (as_matrix of both, precomputed)",
+    "apply": "M @ homogeneous(x), first three rows",
+    "jac_right": "vmap: columns vee(inv(E) @ jvp(expm∘hat, xi, e_k)), E = expm(hat xi)",
+    "grad": None,
+}
+CHECKS = {
+    "exp": "as_matrix(ours) against the reference",
+    "log": "log(exp(xi)) against xi",
+    "compose": "as_matrix(ours) against the reference",
+    "apply": "against the reference",
+    "jac_right": "against the reference",
+    "grad": "against 2 xi",
+}
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(
+        description="Benchmark Sim3 and SE23 against matrix references (jit, interleaved).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--sizes", default=None, help="comma-separated batch sizes (default 1000,1000000)"
+    )
+    p.add_argument("--groups", default=",".join(GROUPS), help="comma-separated subset of Sim3,SE23")
+    p.add_argument(
+        "--ops", default=",".join(OPS), help="comma-separated subset of " + ",".join(OPS)
+    )
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=None,
+        help="interleaved repetitions per case; default: automatic, 3..25 within a time "
+        "budget per case",
+    )
+    p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
+    p.add_argument("--quick", action="store_true", help="N = 100, 3 repeats (smoke test)")
+    p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
+    p.add_argument(
+        "--json",
+        default=None,
+        metavar="PATH",
+        help="also write the raw results (the --save format) to PATH",
+    )
+    p.add_argument("--seed", type=int, default=0)
+    add_save_arguments(p)
+    args = p.parse_args(argv)
+    if args.sizes is None:
+        args.sizes = "100" if args.quick else "1000,1000000"
+    args.sizes = _run.parse_sizes(p, args.sizes)
+    by_name = {g.lower(): g for g in GROUPS}
+    args.groups = _run.parse_choices(
+        p, args.groups, GROUPS, "group", lambda s: by_name.get(s.lower(), s)
+    )
+    args.ops = _run.parse_choices(p, args.ops, OPS, "op", str.lower)
+    return args
+
+
+# --------------------------------------------------------------------------------------
+# The two sides. Every function maps raw arrays -> arrays; elements are built inside the
+# trace. Fresh closures per case, so that compile times are not cached.
+# --------------------------------------------------------------------------------------
+
+
+def make_ours(G, op: str):
+    if op == "exp":
+        return lambda xi: G.exp(xi).parameters()
+    if op == "log":
+        return lambda p: G(p).log()
+    if op == "compose":
+        return lambda pa, pb: (G(pa) @ G(pb)).parameters()
+    if op == "apply":
+        return lambda p, pts: G(p) @ pts
+    if op == "jac_right":
+        return lambda xi: G.jac_right(xi)
+    if op == "grad":
+        return jax.grad(lambda xi: jnp.sum(G.exp(xi).log() ** 2))
+    raise ValueError(op)
+
+
+def make_reference(G, group: str, op: str):
+    """The matrix computation ``op`` stands for, or None where jax has none (log, grad)."""
+
+    if op == "exp":
+        return lambda xi: jax.vmap(expm)(G.hat(xi))
+    if op == "compose":
+        return lambda ma, mb: jnp.matmul(ma, mb)
+    if op == "apply":
+        hom = GROUP_INFO[group]["homogeneous"]
+
+        def apply(m, pts):
+            tail = jnp.broadcast_to(jnp.asarray(hom, pts.dtype), (*pts.shape[:-1], len(hom)))
+            x = jnp.concatenate([pts, tail], axis=-1)
+            return jnp.einsum("...ij,...j->...i", m, x)[..., :3]
+
+        return apply
+    if op == "jac_right":
+        k = G.tangent_dim
+
+        def one(xi):
+            # J_r(ξ) δ = vee(E⁻¹ d/dε expm(hat(ξ + ε δ))), E = expm(hat ξ): every column k
+            # is a jvp through expm in the direction e_k (E itself is the shared primal).
+            f = lambda y: expm(G.hat(y))
+            E, dE = jax.vmap(lambda d: jax.jvp(f, (xi,), (d,)), out_axes=(None, 0))(
+                jnp.eye(k, dtype=xi.dtype)
+            )
+            return G.vee(jnp.linalg.inv(E) @ dE).T  # (k, k): column k is vee(E⁻¹ dE_k)
+
+        return jax.vmap(one)
+    if op in ("log", "grad"):
+        return None
+    raise ValueError(op)
+
+
+# --------------------------------------------------------------------------------------
+# Inputs
+# --------------------------------------------------------------------------------------
+
+
+def make_inputs(G, group: str, op: str, n: int, dtype, seed: int):
+    """(ours' inputs, the reference's inputs or None, the tangents behind them): device
+    arrays of the timed dtype. The reference of compose and apply gets the elements'
+    matrices."""
+
+    info = GROUP_INFO[group]
+    rng = np.random.default_rng([seed, GROUPS.index(group), OPS.index(op), n])
+
+    def tangent():
+        xi = rng.normal(size=(n, info["tangent_dim"]))
+        rot = xi[:, info["rot"]]
+        norm = np.linalg.norm(rot, axis=-1, keepdims=True)
+        ang = rng.uniform(0.0, 2.8, size=(n, 1))
+        xi[:, info["rot"]] = rot / np.maximum(norm, 1e-12) * ang
+        if info["scale"] is not None:
+            xi[:, info["scale"]] = rng.uniform(-1.0, 1.0, size=n)
+        return jnp.asarray(xi, dtype=dtype)
+
+    to_params = jax.jit(lambda x: G.exp(x).parameters())
+    to_matrix = jax.jit(lambda p: G(p).as_matrix())
+
+    xi = tangent()
+    if op in ("exp", "jac_right"):
+        ours, ref = (xi,), (xi,)
+    elif op == "grad":
+        ours, ref = (xi,), None
+    elif op == "log":
+        ours, ref = (to_params(xi),), None
+    elif op == "compose":
+        pa, pb = to_params(xi), to_params(tangent())
+        ours, ref = (pa, pb), (to_matrix(pa), to_matrix(pb))
+    elif op == "apply":
+        p = to_params(xi)
+        pts = jnp.asarray(rng.normal(size=(n, 3)), dtype=dtype)
+        ours, ref = (p, pts), (to_matrix(p), pts)
+    else:
+        raise ValueError(op)
+    return jax.block_until_ready((ours, ref, xi))
+
+
+# --------------------------------------------------------------------------------------
+# Checks (outside the timing, in the timed dtype)
+# --------------------------------------------------------------------------------------
+
+
+def max_rel_diff(x, y) -> float:
+    """max |x - y| / (1 + |y|), non-finite -> inf."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    if x.shape != y.shape:
+        return float("inf")
+    d = np.abs(x - y) / (1.0 + np.abs(y))
+    return float(np.max(np.where(np.isfinite(d), d, np.inf))) if d.size else 0.0
+
+
+def check(G, op: str, out_ours, out_ref, xi) -> float:
+    if op in ("exp", "compose"):
+        return max_rel_diff(jax.jit(lambda p: G(p).as_matrix())(out_ours), out_ref)
+    if op in ("apply", "jac_right"):
+        return max_rel_diff(out_ours, out_ref)
+    if op == "log":
+        return max_rel_diff(out_ours, xi)
+    if op == "grad":
+        return max_rel_diff(out_ours, 2.0 * xi)
+    raise ValueError(op)
+
+
+# --------------------------------------------------------------------------------------
+# Timing
+# --------------------------------------------------------------------------------------
+
+
+SLOW_CALL_S = 5.0  # a side slower than this per call gets at least 2 repetitions, not 3
+
+
+def calls_per_measurement(fn, args, first_s: float, target_s: float):
+    """(calls so that one measurement lasts about target_s, seconds per call). ``first_s``
+    is the time of a call already made; a fast function is timed again over more calls."""
+    t = first_s
+    if t < target_s / 10:
+        t = _run.run_n(fn, args, max(1, min(1000, int(target_s / 10 / max(t, 1e-9)))))
+    return max(1, int(round(target_s / max(t, 1e-9)))), t
+
+
+def available_bytes():
+    """MemAvailable from /proc/meminfo, or None where there is none."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def footprint_bytes(compiled) -> int:
+    """Arguments, output and temporaries of a compiled program (XLA's buffer assignment)."""
+    m = compiled.memory_analysis()
+    return m.argument_size_in_bytes + m.output_size_in_bytes + m.temp_size_in_bytes
+
+
+def timed_call(fn, args):
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    return out, time.perf_counter() - t0
+
+
+def measure(sides, repeats, target_s, budget_s, min_repeats):
+    """Interleaved timing of one or two (fn, args, first call's seconds) sides; returns the
+    per-call seconds of each side, one entry per repetition. Repetition i runs the sides in
+    order for even i, reversed for odd i."""
+    # Beside a slow side (a reference taking seconds per call), a fast side's measurement
+    # lasts a tenth of the slow call (up to 1 s), so that it is not a single short call.
+    target_s = max(target_s, min(1.0, 0.1 * max(first for _, _, first in sides)))
+    plan = [calls_per_measurement(fn, args, first, target_s) for fn, args, first in sides]
+    if repeats is None:
+        one = sum(k * t for k, t in plan)
+        if max(t for _, t in plan) > SLOW_CALL_S:
+            min_repeats = min(min_repeats, 2)
+        repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
+    times = [[] for _ in sides]
+    for i in range(repeats):
+        order = range(len(sides)) if i % 2 == 0 else reversed(range(len(sides)))
+        for j in order:
+            fn, args, _ = sides[j]
+            times[j].append(_run.run_n(fn, args, plan[j][0]))
+    return times
+
+
+# --------------------------------------------------------------------------------------
+# Main benchmark
+# --------------------------------------------------------------------------------------
+
+
+def bench_case(geo, group, op, n, args, dtype, index):
+    G = getattr(geo, group)
+    ours_in, ref_in, xi = make_inputs(G, group, op, n, dtype, args.seed)
+    f_ours = make_ours(G, op)
+    f_ref = make_reference(G, group, op) if ref_in is not None else None
+
+    # Alternate the compile order between cases so neither side systematically goes first.
+    comp_ref = None
+    if f_ref is not None and index % 2 == 1:
+        c_ref, comp_ref = _run.compile_fn(f_ref, ref_in)
+    c_ours, comp_ours = _run.compile_fn(f_ours, ours_in)
+    if f_ref is not None and index % 2 == 0:
+        c_ref, comp_ref = _run.compile_fn(f_ref, ref_in)
+
+    # A reference that would not fit in memory is not run (SE23 jac_right at 10^6 needs
+    # ~13 GB of temporaries in float32); the case then reports ours alone.
+    ref_note, mem_ref = None, None
+    if f_ref is not None:
+        mem_ref = footprint_bytes(c_ref)
+        avail = available_bytes()
+        if avail is not None and mem_ref > 0.8 * avail:
+            ref_note = f"not run: needs {mem_ref / 1e9:.1f} GB, {avail / 1e9:.1f} GB available"
+            f_ref = c_ref = None
+
+    # Warm-up executions, timed only to size the measurements; their outputs are checked.
+    out_ours, first_ours = timed_call(c_ours, ours_in)
+    sides = [(c_ours, ours_in, first_ours)]
+    out_ref = None
+    if f_ref is not None:
+        out_ref, first_ref = timed_call(c_ref, ref_in)
+        sides.append((c_ref, ref_in, first_ref))
+    diff = (
+        check(G, op, out_ours, out_ref, xi)
+        if op in ("log", "grad") or out_ref is not None
+        else None
+    )
+    del out_ours, out_ref
+
+    target_s = 0.002 if args.quick else 0.01
+    budget_s = 0.1 if args.quick else 1.5
+    repeats = 3 if (args.quick and args.repeats is None) else args.repeats
+    times = measure(sides, repeats, target_s, budget_s, min_repeats=3)
+
+    r = {
+        "group": group,
+        "op": op,
+        "n": n,
+        "dtype": args.dtype,
+        "ours_ns_per_elem": statistics.median(times[0]) * 1e9 / n,
+        "ref_ns_per_elem": None,
+        "ratio": None,
+        "ratio_q1": None,
+        "ratio_q3": None,
+        "compile_ours_ms": comp_ours * 1e3,
+        "compile_ref_ms": None if comp_ref is None else comp_ref * 1e3,
+        "repeats": len(times[0]),
+        "reference": REFERENCES[op],
+        "reference_note": ref_note,
+        "check": CHECKS[op],
+        "max_rel_diff": diff,
+        "memory_ours_mb": footprint_bytes(c_ours) / 1e6,
+        "memory_ref_mb": None if mem_ref is None else mem_ref / 1e6,
+    }
+    if f_ref is not None:
+        st = _run.paired_stats(times[0], times[1])
+        r.update(
+            ref_ns_per_elem=st["median_b"] * 1e9 / n,
+            ratio=st["ratio"],
+            ratio_q1=st["ratio_q1"],
+            ratio_q3=st["ratio_q3"],
+        )
+    return r
+
+
+def global_warmup(geo, dtype):
+    """Pay one-time process costs (backend init, first compile) before measuring anything."""
+    for g in GROUPS:
+        G = getattr(geo, g)
+        x = jnp.zeros((1, G.tangent_dim), dtype=dtype)
+        jax.block_until_ready(jax.jit(lambda x, G=G: G.exp(x).parameters())(x))
+        jax.block_until_ready(jax.jit(lambda x, G=G: jax.vmap(expm)(G.hat(x)))(x))
+
+
+# --------------------------------------------------------------------------------------
+# Reporting
+# --------------------------------------------------------------------------------------
+
+HEADER = [
+    "group",
+    "op",
+    "N",
+    "ours /elem",
+    "reference /elem",
+    "speed-up",
+    "speed-up IQR",
+    "compile ours ms",
+    "compile ref ms",
+    "repeats",
+    "max rel diff",
+]
+
+
+def table_rows(results):
+    dash = "–"
+    rows = []
+    for r in results:
+        has_ref = r["ratio"] is not None
+        rows.append(
+            [
+                r["group"],
+                r["op"],
+                fmt_n(r["n"]),
+                fmt_ns(r["ours_ns_per_elem"]),
+                fmt_ns(r["ref_ns_per_elem"]) if has_ref else (r.get("reference_note") or dash),
+                f"{r['ratio']:.2f}" if has_ref else dash,
+                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}" if has_ref else dash,
+                f"{r['compile_ours_ms']:.0f}",
+                dash if r["compile_ref_ms"] is None else f"{r['compile_ref_ms']:.0f}",
+                str(r["repeats"]),
+                dash if r["max_rel_diff"] is None else f"{r['max_rel_diff']:.1e}",
+            ]
+        )
+    return rows
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    if args.dtype == "float64":
+        jax.config.update("jax_enable_x64", True)
+    dtype = jnp.float64 if args.dtype == "float64" else jnp.float32
+
+    geo = importlib.import_module("jaxlie_geo")
+    info = _run.machine_info("benchmarks/extended_groups.py", dtype=args.dtype)
+    info.pop("jaxlie", None)
+    print("# Sim3 and SE23 against matrix references")
+    for k, v in info.items():
+        print(f"  {k:13s} {v}")
+    print(flush=True)
+
+    t_start = time.perf_counter()
+    global_warmup(geo, dtype)
+
+    results = []
+    index = 0
+    for group in args.groups:
+        for op in args.ops:
+            for n in args.sizes:
+                r = bench_case(geo, group, op, n, args, dtype, index)
+                index += 1
+                results.append(r)
+                row = table_rows([r])[0]
+                print(
+                    f"{group:4s} {op:9s} N={row[2]:>6s}  ours {row[3]:>9s}/el  "
+                    f"ref {row[4]:>9s}{'/el' if r['ratio'] is not None else '   '}  "
+                    f"speed-up {row[5]:>5s} [{row[6]}]  "
+                    f"compile {row[7]:>5s}/{row[8]:>5s} ms  x{row[9]}  reldiff {row[10]}",
+                    flush=True,
+                )
+
+    elapsed = time.perf_counter() - t_start
+    print()
+    print(
+        f"## Results ({args.dtype}; per element = median time per call / N; speed-up = median "
+        "over repetitions of reference time / our time, >1 means ours is faster; IQR of those "
+        "ratios; max rel diff = max |ours - reference| / (1 + |reference|))"
+    )
+    print()
+    print(_run.render(HEADER, table_rows(results), args.markdown))
+    print()
+    slower = [r for r in results if r["ratio"] is not None and r["ratio"] < 0.95]
+    for r in slower:
+        print(f"slower than the reference: {r['group']} {r['op']} N={fmt_n(r['n'])}")
+    tol = 1e-3 if args.dtype == "float32" else 1e-8
+    for r in results:
+        if r["max_rel_diff"] is not None and not r["max_rel_diff"] < tol:
+            print(
+                f"disagreement beyond {tol:g}: {r['group']} {r['op']} N={fmt_n(r['n'])}: "
+                f"{r['max_rel_diff']:.3g} ({r['check']})"
+            )
+    print(f"total benchmark time: {elapsed:.0f} s")
+
+    data = {"machine": info, "results": results, "elapsed_s": elapsed}
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(data, f, indent=1, ensure_ascii=False)
+    if args.save:
+        save(f"extended-groups-{args.dtype}", data, args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
