@@ -48,8 +48,9 @@ Usage:
   python benchmarks/extended_groups.py --quick            # smoke test: N = 100, 3 repeats
   python benchmarks/extended_groups.py --groups SE23 --ops exp,jac_right --sizes 1000
 
-On a 2-core CPU the default float32 run takes about 5 minutes, most of it in the
-references at N = 10^6 (jac_right's reference takes 15-35 s per call there, exp's ~10 s).
+On a 2-core CPU the default float32 run takes 5-6 minutes, most of it in the references at
+N = 10^6 (jac_right's reference takes 20-35 s per call there, exp's ~10 s); float64 about
+2.5 minutes (jac_right's references at 10^6 need 22 and 44 GB and are not run).
 """
 
 from __future__ import annotations
