@@ -20,7 +20,10 @@ _C = TypeVar("_C", bound=type)
 @dataclass_transform(frozen_default=True, eq_default=False)
 def pytree_dataclass(cls: _C) -> _C:
     """Make ``cls`` a frozen dataclass (``eq=False``) and register it as a pytree whose
-    structure records the class: every field is a child, with ``GetAttrKey`` key paths.
+    structure records the class: every field is a child, with ``GetAttrKey`` key paths,
+    except fields declared with ``dataclasses.field(metadata={"static": True})``, which
+    are part of the structure (hashable, compared by ``==``: a spline's degree and knot
+    spacing), so a jitted function compiles once per value.
 
     A class that inherits a ``__repr__`` keeps it (group elements print rounded values, as
     jaxlie's do); others get the dataclass's.
@@ -36,21 +39,26 @@ def pytree_dataclass(cls: _C) -> _C:
     own_repr = cls.__repr__ is object.__repr__
     cls = dataclasses.dataclass(frozen=True, eq=False, repr=own_repr)(cls)  # type: ignore[assignment]
     cls.__setattr__ = _setattr_if_mutable  # type: ignore[assignment,method-assign]
-    names = tuple(f.name for f in dataclasses.fields(cls))
+    fields = dataclasses.fields(cls)
+    names = tuple(f.name for f in fields if not f.metadata.get("static", False))
+    static = tuple(f.name for f in fields if f.metadata.get("static", False))
     keys = tuple(jax.tree_util.GetAttrKey(n) for n in names)
 
-    def flatten_with_keys(x: Any) -> Tuple[Tuple[Any, ...], None]:
-        return tuple((k, getattr(x, n)) for k, n in zip(keys, names)), None
+    def flatten_with_keys(x: Any) -> Tuple[Tuple[Any, ...], Tuple[Any, ...]]:
+        aux = tuple(getattr(x, n) for n in static)
+        return tuple((k, getattr(x, n)) for k, n in zip(keys, names)), aux
 
-    def flatten(x: Any) -> Tuple[Tuple[Any, ...], None]:
-        return tuple(getattr(x, n) for n in names), None
+    def flatten(x: Any) -> Tuple[Tuple[Any, ...], Tuple[Any, ...]]:
+        return tuple(getattr(x, n) for n in names), tuple(getattr(x, n) for n in static)
 
-    def unflatten(_: None, children: Iterable[Any]) -> Any:
+    def unflatten(aux: Tuple[Any, ...], children: Iterable[Any]) -> Any:
         # Bypass the frozen dataclass's __init__ (one object.__setattr__ per field either
         # way; this saves the call): unflattening runs on every jitted call's outputs.
         obj: Any = object.__new__(cls)
         for n, c in zip(names, children):
             object.__setattr__(obj, n, c)
+        for n, a in zip(static, aux):
+            object.__setattr__(obj, n, a)
         return obj
 
     jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
