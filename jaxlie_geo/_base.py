@@ -300,6 +300,16 @@ class MatrixLieGroup(abc.ABC):
         """Lie-algebra adjoint: the matrix of y ↦ vee([hat x, hat y]);
         ``(*batch, k) -> (*batch, k, k)``. ``Ad(exp x) = expm(ad x)``."""
 
+    def _adjoint_apply(self, tangent: jax.Array) -> jax.Array:
+        """``Ad(self) x`` for tangents ``(…, k)`` whose batch broadcasts with ``self``'s.
+        Groups whose adjoint has zero or repeated blocks apply it without the matrix."""
+        return jnp.einsum("...ij,...j->...i", self.adjoint(), tangent)
+
+    @classmethod
+    def _bracket(cls, a: jax.Array, b: jax.Array) -> jax.Array:
+        """The Lie bracket ``[a, b] = ad(a) b = vee(â b̂ − b̂ â)``, batch axes broadcast."""
+        return jnp.einsum("...ij,...j->...i", cls.ad(a), b)
+
     @overload
     def __matmul__(self, other: Self) -> Self: ...
 

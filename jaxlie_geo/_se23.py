@@ -199,6 +199,34 @@ class SE23(MatrixLieGroup):
             [[W, skew(xi[..., :3]), None], [None, W, None], [None, skew(xi[..., 6:]), W]]
         )
 
+    @override
+    def _adjoint_apply(self, tangent: jax.Array) -> jax.Array:
+        """Ad(T)(ρ, ω, ν) = (R ρ + p × R ω, R ω, R ν + v × R ω), without the 9×9 matrix."""
+        R = self.rotation().as_matrix()
+        Rx = [jnp.einsum("...ij,...j->...i", R, tangent[..., i : i + 3]) for i in (0, 3, 6)]
+        return jnp.concatenate(
+            [
+                Rx[0] + jnp.cross(self.position(), Rx[1]),
+                Rx[1],
+                Rx[2] + jnp.cross(self.velocity(), Rx[1]),
+            ],
+            -1,
+        )
+
+    @classmethod
+    @override
+    def _bracket(cls, a: jax.Array, b: jax.Array) -> jax.Array:
+        """[(ρ₁, ω₁, ν₁), (ρ₂, ω₂, ν₂)] = (ω₁ × ρ₂ + ρ₁ × ω₂, ω₁ × ω₂, ω₁ × ν₂ + ν₁ × ω₂)."""
+        w1, w2 = a[..., 3:6], b[..., 3:6]
+        return jnp.concatenate(
+            [
+                jnp.cross(w1, b[..., :3]) + jnp.cross(a[..., :3], w2),
+                jnp.cross(w1, w2),
+                jnp.cross(w1, b[..., 6:]) + jnp.cross(a[..., 6:], w2),
+            ],
+            -1,
+        )
+
     @classmethod
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:

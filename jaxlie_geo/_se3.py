@@ -261,6 +261,23 @@ class SE3(SEBase[SO3]):
         xi = cls._check_tangent(tangent, "ad")
         return cls._blocks(skew(xi[..., 3:]), skew(xi[..., :3]))
 
+    @override
+    def _adjoint_apply(self, tangent: jax.Array) -> jax.Array:
+        """Ad(T)(v, ω) = (R v + t × R ω, R ω), without the 6×6 matrix."""
+        R = self.rotation().as_matrix()
+        Rv = jnp.einsum("...ij,...j->...i", R, tangent[..., :3])
+        Rw = jnp.einsum("...ij,...j->...i", R, tangent[..., 3:])
+        return jnp.concatenate([Rv + jnp.cross(self.translation(), Rw), Rw], -1)
+
+    @classmethod
+    @override
+    def _bracket(cls, a: jax.Array, b: jax.Array) -> jax.Array:
+        """[(ρ₁, φ₁), (ρ₂, φ₂)] = (φ₁ × ρ₂ + ρ₁ × φ₂, φ₁ × φ₂)."""
+        rho1, phi1, rho2, phi2 = a[..., :3], a[..., 3:], b[..., :3], b[..., 3:]
+        return jnp.concatenate(
+            [jnp.cross(phi1, rho2) + jnp.cross(rho1, phi2), jnp.cross(phi1, phi2)], -1
+        )
+
     # -- fitting --------------------------------------------------------------------
 
     @classmethod

@@ -445,6 +445,12 @@ class SO3(SOBase):
     def ad(cls, tangent: hints.Array) -> jax.Array:
         return skew(cls._check_tangent(tangent, "ad"))
 
+    @classmethod
+    @override
+    def _bracket(cls, a: jax.Array, b: jax.Array) -> jax.Array:
+        """[a, b] = a × b."""
+        return jnp.cross(a, b)
+
     # -- operations -----------------------------------------------------------------
 
     @override
