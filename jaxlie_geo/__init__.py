@@ -12,6 +12,7 @@ from . import interop as interop
 from . import jacobians as jacobians
 from . import manifold as manifold
 from . import motion as motion
+from . import splines as splines
 from . import uncertainty as uncertainty
 from . import utils as utils
 from ._base import MatrixLieGroup as MatrixLieGroup
@@ -54,6 +55,7 @@ __all__ = [
     "jacobians",
     "manifold",
     "motion",
+    "splines",
     "uncertainty",
     "utils",
 ]
