@@ -303,12 +303,12 @@ class MatrixLieGroup(abc.ABC):
     def _adjoint_apply(self, tangent: jax.Array) -> jax.Array:
         """``Ad(self) x`` for tangents ``(…, k)`` whose batch broadcasts with ``self``'s.
         Groups whose adjoint has zero or repeated blocks apply it without the matrix."""
-        return jnp.einsum("...ij,...j->...i", self.adjoint(), tangent)
+        return matmul_unrolled(self.adjoint(), tangent[..., None])[..., 0]
 
     @classmethod
     def _bracket(cls, a: jax.Array, b: jax.Array) -> jax.Array:
         """The Lie bracket ``[a, b] = ad(a) b = vee(â b̂ − b̂ â)``, batch axes broadcast."""
-        return jnp.einsum("...ij,...j->...i", cls.ad(a), b)
+        return matmul_unrolled(cls.ad(a), b[..., None])[..., 0]
 
     @overload
     def __matmul__(self, other: Self) -> Self: ...

@@ -29,7 +29,7 @@ from ._so3 import (
     log_quaternion_parts,
     skew,
 )
-from ._xla import aligned, matmul
+from ._xla import aligned, matmul, matmul_unrolled
 
 
 @pytree_dataclass
@@ -203,7 +203,7 @@ class SE23(MatrixLieGroup):
     def _adjoint_apply(self, tangent: jax.Array) -> jax.Array:
         """Ad(T)(ρ, ω, ν) = (R ρ + p × R ω, R ω, R ν + v × R ω), without the 9×9 matrix."""
         R = self.rotation().as_matrix()
-        Rx = [jnp.einsum("...ij,...j->...i", R, tangent[..., i : i + 3]) for i in (0, 3, 6)]
+        Rx = [matmul_unrolled(R, tangent[..., i : i + 3, None])[..., 0] for i in (0, 3, 6)]
         return jnp.concatenate(
             [
                 Rx[0] + jnp.cross(self.position(), Rx[1]),

@@ -25,7 +25,7 @@ from ._so3 import (
     skew,
     skew_sq,
 )
-from ._xla import matmul
+from ._xla import matmul, matmul_unrolled
 
 _FORMS = ("axis_split", "textbook")
 
@@ -265,8 +265,8 @@ class SE3(SEBase[SO3]):
     def _adjoint_apply(self, tangent: jax.Array) -> jax.Array:
         """Ad(T)(v, ω) = (R v + t × R ω, R ω), without the 6×6 matrix."""
         R = self.rotation().as_matrix()
-        Rv = jnp.einsum("...ij,...j->...i", R, tangent[..., :3])
-        Rw = jnp.einsum("...ij,...j->...i", R, tangent[..., 3:])
+        Rv = matmul_unrolled(R, tangent[..., :3, None])[..., 0]
+        Rw = matmul_unrolled(R, tangent[..., 3:, None])[..., 0]
         return jnp.concatenate([Rv + jnp.cross(self.translation(), Rw), Rw], -1)
 
     @classmethod

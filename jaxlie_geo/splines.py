@@ -48,6 +48,7 @@ import numpy as onp
 from . import hints
 from ._base import GroupT, MatrixLieGroup
 from ._pytree import pytree_dataclass
+from ._xla import matmul
 
 MAX_DEGREE = 5
 """The highest degree supported (order 6)."""
@@ -80,21 +81,24 @@ def cumulative_basis(order: int) -> Tuple[Tuple[Fraction, ...], ...]:
 
 
 def _blending(order: int, u: jax.Array, derivatives: int) -> jax.Array:
-    """λ_j(u) and its first ``derivatives`` u-derivatives: ``(derivatives + 1, *u.shape, k)``."""
+    """λ_j(u) and its first ``derivatives`` u-derivatives: ``(derivatives + 1, *u.shape, k)``.
+    Horner's rule with the exact coefficients as constants (elementwise: no small matrix
+    product, and exact in any matmul precision mode)."""
     k = order
-    M = onp.array([[float(c) for c in row] for row in cumulative_basis(k)])  # (j, n)
+    M = cumulative_basis(k)
     out = []
     for r in range(derivatives + 1):
-        # d^r/du^r uⁿ = n!/(n−r)! u^{n−r}
-        powers = []
-        for n in range(k):
-            if n < r:
-                powers.append(jnp.zeros_like(u))
-            else:
-                c = math.factorial(n) // math.factorial(n - r)
-                powers.append(c * u ** (n - r) if n > r else jnp.full_like(u, c))
-        P = jnp.stack(powers, axis=-1)  # (*S, n)
-        out.append(P @ jnp.asarray(M.T, u.dtype))
+        rows = []
+        for j in range(k):
+            # d^r/du^r Σ_n M[j][n] uⁿ = Σ_{n ≥ r} M[j][n] n!/(n−r)! u^{n−r}
+            coeffs = [
+                float(M[j][n] * (math.factorial(n) // math.factorial(n - r))) for n in range(r, k)
+            ]
+            acc = jnp.full_like(u, coeffs[-1]) if coeffs else jnp.zeros_like(u)
+            for c in reversed(coeffs[:-1]):
+                acc = acc * u + c
+            rows.append(acc)
+        out.append(jnp.stack(rows, axis=-1))
     return jnp.stack(out)
 
 
@@ -318,7 +322,7 @@ class Spline(Generic[GroupT]):
         ev = _evaluate(self, self.locate(t), 3)
         if frame == "world":
             G = type(ev.value)
-            fix = jnp.einsum("...ij,...j->...i", G.ad(ev.velocity), ev.acceleration)
+            fix = G._bracket(ev.velocity, ev.acceleration)
             return _in_frame(ev, ev.jerk + fix, frame)
         return _in_frame(ev, ev.jerk, frame)
 
@@ -345,7 +349,7 @@ def _in_frame(ev: SplineEvaluation, x: jax.Array, frame: str) -> jax.Array:
     if frame == "body":
         return x
     if frame == "world":
-        return jnp.einsum("...ij,...j->...i", ev.value.adjoint(), x)
+        return ev.value._adjoint_apply(x)
     raise ValueError(f"Spline: frame must be 'body' or 'world', got {frame!r}.")
 
 
@@ -386,10 +390,6 @@ def _segment(
     d = jnp.stack([_gather(D, seg + j - 1, batch) for j in range(1, spline.order)])
     lam = jnp.moveaxis(_blending(spline.order, frac, 3), -1, 1)  # (4, k, *S)
     return first, d, lam, S
-
-
-def _mv(A: jax.Array, x: jax.Array) -> jax.Array:
-    return jnp.einsum("...ij,...j->...i", A, x)
 
 
 def _steps(T: Any, d: jax.Array, lam: jax.Array) -> Tuple[Any, Any]:
@@ -453,8 +453,8 @@ def _jacobians(spline: Spline[Any], where: SplineTime) -> ControlPointJacobians:
     l0 = lam[0, 1:]
     Jstep = l0[..., None, None] * G.jac_right(l0[..., None] * d)
     # Δd_j is non-zero on control points j − 1 and j only: the blocks (−J⁻¹ Ad, J⁻¹).
-    Dd = jnp.stack([-jnp.einsum("...ij,...jk->...ik", Jinv, back), Jinv], axis=-3)
-    eta = jnp.einsum("...ij,...bjk->...bik", Jstep, Dd)  # (k−1, *S, 2, n, n)
+    Dd = jnp.stack([-matmul(Jinv, back), Jinv], axis=-3)
+    eta = matmul(Jstep[..., None, :, :], Dd)  # (k−1, *S, 2, n, n)
     P = jnp.zeros((*S, k, n, n), dtype)
     P = P.at[..., 0, :, :].set(jnp.eye(n, dtype=dtype))  # value
     V, Acc = jnp.zeros_like(P), jnp.zeros_like(P)  # velocity, acceleration
@@ -594,14 +594,18 @@ def _normal_equations(
     G = type(poses)
     jac = _jacobians(spline, where)
     r = poses._between(_evaluate(spline, where, 0).value).log()
-    J = jnp.einsum("nij,nbjk->nbik", G.jac_right_inv(r), jac.value)  # (N, k, dim, dim)
+    J = matmul(G.jac_right_inv(r)[:, None], jac.value)  # (N, k, dim, dim)
     WJ = w[:, None, :, None] * J
     n, k = spline.control_points.get_batch_axes()[0], spline.order
     idx = jac.first[:, None] + jnp.arange(k)  # (N, k)
-    blocks = jnp.einsum("nair,nbis->nabrs", J, WJ)  # (N, k, k, dim, dim)
+    blocks = matmul(jnp.swapaxes(J, -1, -2)[:, :, None], WJ[:, None])  # (N, k, k, dim, dim)
     H = jnp.zeros((n, n, G.tangent_dim, G.tangent_dim), r.dtype)
     H = H.at[idx[:, :, None], idx[:, None, :]].add(blocks)
-    g = jnp.zeros((n, G.tangent_dim), r.dtype).at[idx].add(jnp.einsum("nair,ni->nar", WJ, r))
+    g = (
+        jnp.zeros((n, G.tangent_dim), r.dtype)
+        .at[idx]
+        .add(matmul(jnp.swapaxes(WJ, -1, -2), r[:, None, :, None])[..., 0])
+    )
     return H, g
 
 
