@@ -457,12 +457,15 @@ def test_static_batch_axes_accept_lists(batch_axes):
         assert G.sample_uniform(key, batch_axes=batch_axes).get_batch_axes() == tuple(batch_axes)
 
 
-@over_groups_dtypes
-def test_export_with_a_symbolic_batch(G, dtype):
+@over_groups
+def test_export_with_a_symbolic_batch(G):
     """``jax.export`` with a symbolic batch size (shape polymorphism, as jaxlie allows):
     every size-dependent choice (the angle-dependent kernel, chunking, broadcast checks)
-    takes its default, and the exported function computes what ``jit`` does. (jax < 0.6's
+    takes its default, and the exported function computes what ``jit`` does. In float32,
+    the dtype of programs exported without x64 (the shape logic is the same in float64;
+    each of these programs compiles twice, in seconds). (jax < 0.6's
     ``jax.export`` imports absl-py, which jax does not declare: skipped where it is absent.)"""
+    dtype = jnp.float32
     export = pytest.importorskip("jax.export", reason="jax.export needs absl-py on this jax")
 
     def f(pt, pu, x, p):
