@@ -9,6 +9,7 @@ The raw results are JSON files, one per machine and table::
     benchmarks/raw/<machine>/accuracy.json           accuracy.py --save
     benchmarks/raw/<machine>/extended-groups-<dtype>.json
                                                      extended_groups.py --save
+    benchmarks/raw/<machine>/splines-<dtype>.json   splines.py --save
     benchmarks/raw/<machine>/baseline-speed-<dtype>.json
                                                      run.py --json of an earlier commit,
                                                      with a "change" entry: the page shows
@@ -692,6 +693,131 @@ def _extended_table(data: dict) -> list:
     return lines + [f"- {note}" for note in notes] + [""]
 
 
+SPLINE_BENCHMARKS = ("derivatives", "jacobians")
+
+SPLINES_METHOD = """\
+Method (`splines.py`): one SE3 spline of 100 control points (`jaxlie_geo.splines.Spline`, a
+random walk: steps with standard normal translations times 0.3 and rotation angles uniform in
+(0, 0.5) rad; Δt = 0.1), degrees 3 and 5, evaluated at N times given to both sides as the
+same `SplineTime` (segments uniform, fractions uniform in (0.001, 0.999)). **Derivatives**:
+`spline.evaluate(t, 2)`, the value with the body velocity ω and dω/dt from the recursions of
+Sommer, Demmel, Usenko and Cremers, "Efficient Derivative Computation for Cumulative
+B-Splines on Lie Groups" (2020), against autodiff of the value: the parameters (q, p) of
+`spline(t)` differentiated twice in the segment fraction u by nested forward mode (`jax.jvp`
+of `jax.jvp`, on the whole batch), then SE3's kinematics ω = (Rᵀṗ, 2 vec(q̄ q̇)) and dω/dt =
+(Rᵀp̈ − ω_rot × Rᵀṗ, 2 vec(q̄ q̈)), divided by Δt and Δt². This was the fastest autodiff of
+the value measured; through the 4×4 matrices (ω = vee(T⁻¹ Ṫ)) it is 2 to 5 times slower on a
+CPU. **Jacobians**: `spline.jacobians(t)`, the blocks of the value, ω and dω/dt with respect
+to right perturbations T_m exp(δ_m) of the degree + 1 control points a time depends on,
+against `jax.vmap` over the times of `jax.jacfwd` in δ (shape (degree + 1, 6)) of
+(log(T₀⁻¹ T(δ)), ω(δ), dω/dt(δ)), evaluated by `evaluate(·, 2)` on those control points
+alone. Outputs are checked against the references (max |Δ| / (1 + |ref|) below 1e-3 in
+float32, 1e-8 in float64, unless listed). Timing is `extended_groups.py`'s: one jitted call
+on the whole batch, inputs on the device, interleaved repetitions (at least 3, or 2 where a
+call takes over 5 s), median time per call divided by N; speed-up = autodiff's time / ours
+(median of the paired ratios, IQR in brackets); compile time is one trace + lower + XLA
+compile. A side whose compiled program needs more than 80% of the available memory is
+compiled but not run.\
+"""
+
+
+def splines_section(raw: dict, order: list) -> list:
+    found = [
+        raw[m][f"splines-{dt}"]
+        for m in order
+        for dt in ("float32", "float64")
+        if f"splines-{dt}" in raw[m]
+    ]
+    if not found:
+        return []
+    lines = ["## Cumulative B-splines against autodiff", ""]
+    lines += SPLINES_METHOD.splitlines() + [""]
+    for data in found:
+        lines += _splines_table(data)
+    return lines
+
+
+def _splines_table(data: dict) -> list:
+    info, res = data["machine"], data["results"]
+    dtype = info.get("dtype", res[0].get("dtype", "?"))
+    key = lambda r: (SPLINE_BENCHMARKS.index(r["benchmark"]), r["degree"], r["n"])
+    body = []
+    for r in sorted(res, key=key):
+        ref = r["ratio"] is not None
+        speed = f"{r['ratio']:.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]" if ref else "–"
+        if ref and _slower(r):
+            speed = f"**{speed}**"
+        ours, auto = r["ours_ns_per_elem"], r["ref_ns_per_elem"]
+        body.append(
+            [
+                r["benchmark"],
+                str(r["degree"]),
+                pretty_n(r["n"]),
+                fmt_ns(ours) if ours is not None else "not run ¹",
+                fmt_ns(auto) if auto is not None else "not run ¹",
+                speed,
+                f"{r['compile_ours_ms']:.0f} / {r['compile_ref_ms']:.0f}",
+            ]
+        )
+    header = [
+        "benchmark",
+        "degree",
+        "N",
+        "ours",
+        "autodiff",
+        "speed-up",
+        "compile ms, ours / autodiff",
+    ]
+    groups = sorted({r["group"] for r in res})
+    points = sorted({r["control_points"] for r in res})
+    lines = [
+        f"### {label(info)}, {dtype}",
+        "",
+        f"jax {info.get('jax', '?')}, measured {_date(info)}; {', '.join(groups)}, "
+        f"{', '.join(map(str, points))} control points. Times per element (one time on the "
+        "spline); **bold**: ours slower, with the whole IQR below 1.",
+        "",
+    ]
+    lines += table(header, body, "lllrrrr") + [""]
+    tol = 1e-3 if dtype == "float32" else 1e-8
+    where = lambda r: f"{r['benchmark']} degree {r['degree']} at {_n_at(r['n'])}"
+    notes = []
+    slower = [r for r in res if r["ratio"] is not None and _slower(r)]
+    if slower:
+        notes.append(
+            "Slower than autodiff: "
+            + ", ".join(f"{where(r)} ({r['ratio']:.2f})" for r in slower)
+            + "."
+        )
+    not_run = [
+        f"{side} of {where(r)} ({r[mem] / 1e3:.1f} GB)"
+        for r in res
+        for side, note, mem in (
+            ("ours", "ours_note", "memory_ours_mb"),
+            ("autodiff", "reference_note", "memory_ref_mb"),
+        )
+        if r[note]
+    ]
+    if not_run:
+        notes.append(
+            "¹ Compiled but not run, the program larger than 80% of the memory available: "
+            + ", ".join(not_run)
+            + "."
+        )
+    checked = [r for r in res if r["max_rel_diff"] is not None]
+    differ = [r for r in checked if not r["max_rel_diff"] < tol]
+    worst = max((r["max_rel_diff"] for r in checked), default=float("nan"))
+    if differ:
+        notes.append(
+            f"Outputs differ beyond {tol:g} (max |Δ| / (1 + |ref|)): "
+            + ", ".join(f"{where(r)} ({r['max_rel_diff']:.2g})" for r in differ)
+            + "."
+        )
+    else:
+        notes.append(f"Largest difference from autodiff: {worst:.1e}.")
+    return lines + [f"- {note}" for note in notes] + [""]
+
+
 def change_section(raw: dict, order: list) -> list:
     """Before and after a change: a baseline run of an earlier commit (``baseline-speed-*``,
     with its ``change`` entry) beside today's run on the same machine."""
@@ -833,6 +959,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += speed_section(raw, order)
     lines += jacobians_section(raw, order)
     lines += extended_section(raw, order)
+    lines += splines_section(raw, order)
     lines += change_section(raw, order)
     lines += accuracy_section(raw, order)
     while lines and lines[-1] == "":
