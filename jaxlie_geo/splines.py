@@ -47,6 +47,7 @@ import numpy as onp
 
 from . import hints
 from ._base import GroupT, MatrixLieGroup
+from ._batch import in_chunks
 from ._pytree import pytree_dataclass
 from ._xla import matmul
 
@@ -373,23 +374,25 @@ def _deltas(spline: Spline[Any]) -> jax.Array:
     return cp[:-1]._between(cp[1:]).log()
 
 
-def _segment(
+def _gathered(
     spline: Spline[Any], where: SplineTime
-) -> Tuple[Any, jax.Array, jax.Array, Tuple[int, ...]]:
-    """The first control point T_s, the k − 1 deltas d_j ``(k−1, *S, dim)`` and the
-    blending derivatives ``(4, k, *S)`` at each time."""
+) -> Tuple[jax.Array, jax.Array, jax.Array, Tuple[int, ...]]:
+    """Per time: the parameters of the first control point T_s ``(*S, P)``, the k − 1
+    deltas d_j ``(*S, k−1, dim)`` and the fraction ``S``."""
     cp = spline.control_points
-    G = type(cp)
     batch = cp.get_batch_axes()[1:]
     seg, frac = where
-    S = jnp.broadcast_shapes(jnp.shape(seg), jnp.shape(frac), batch)
+    S = tuple(jnp.broadcast_shapes(jnp.shape(seg), jnp.shape(frac), batch))
     seg = jnp.broadcast_to(seg, S)
-    frac = jnp.broadcast_to(frac, S)
-    first = G(_gather(cp.parameters(), seg, batch))  # type: ignore[call-arg]
     D = _deltas(spline)
-    d = jnp.stack([_gather(D, seg + j - 1, batch) for j in range(1, spline.order)])
-    lam = jnp.moveaxis(_blending(spline.order, frac, 3), -1, 1)  # (4, k, *S)
-    return first, d, lam, S
+    d = jnp.stack([_gather(D, seg + j - 1, batch) for j in range(1, spline.order)], axis=-2)
+    return _gather(cp.parameters(), seg, batch), d, jnp.broadcast_to(frac, S), S
+
+
+def _segment(G: Any, order: int, p: jax.Array, d: jax.Array, u: jax.Array) -> Tuple[Any, ...]:
+    """T_s, the deltas ``(k−1, *S, dim)`` and the blending derivatives ``(4, k, *S)``."""
+    lam = jnp.moveaxis(_blending(order, u, 3), -1, 1)
+    return G(p), jnp.moveaxis(d, -2, 0), lam, u.shape
 
 
 def _steps(T: Any, d: jax.Array, lam: jax.Array) -> Tuple[Any, Any]:
@@ -414,13 +417,26 @@ def _ad_blocks(G: Any, a: jax.Array, X: jax.Array) -> jax.Array:
 
 @functools.partial(jax.jit, static_argnums=2)
 def _evaluate(spline: Spline[Any], where: SplineTime, derivatives: int) -> SplineEvaluation:
-    T, d, lam, S = _segment(spline, where)
-    G = type(T)
+    G = type(spline.control_points)
+    p, d, u, S = _gathered(spline, where)
+    # Elementwise in the times: large batches run in chunks on CPU (``_batch.in_chunks``),
+    # so the recursions' temporaries stay in cache.
+    out = in_chunks(
+        functools.partial(_recursions, G, spline.order, spline.dt, derivatives), S, p, d, u
+    )
+    return SplineEvaluation(G(out[0]), *out[1:])
+
+
+def _recursions(
+    G: Any, order: int, dt: float, derivatives: int, p: jax.Array, d: jax.Array, u: jax.Array
+) -> Tuple[jax.Array, ...]:
+    """Value and derivatives from the gathered inputs (``_gathered``), per time."""
+    T, d, lam, S = _segment(G, order, p, d, u)
     Ainv, T = _steps(T, d, lam)
     zero = jnp.zeros((*S, G.tangent_dim), d.dtype)
     w, dw, ddw = zero, zero, zero
     if derivatives:
-        for j in range(1, spline.order):
+        for j in range(1, order):
             dj, Ad = d[j - 1], Ainv[j - 1]._adjoint_apply
             l1, l2, l3 = (lam[r, j][..., None] for r in range(1, 4))
             w = Ad(w) + l1 * dj
@@ -436,15 +452,26 @@ def _evaluate(spline: Spline[Any], where: SplineTime, derivatives: int) -> Splin
                         + l3 * dj
                     )
                 dw = dw_new
-    h = jnp.asarray(spline.dt, d.dtype)
-    return SplineEvaluation(T, w / h, dw / h**2, ddw / h**3)
+    h = jnp.asarray(dt, d.dtype)
+    return T.parameters(), w / h, dw / h**2, ddw / h**3
 
 
 @jax.jit
 def _jacobians(spline: Spline[Any], where: SplineTime) -> ControlPointJacobians:
-    T, d, lam, S = _segment(spline, where)
-    G = type(T)
-    k, n = spline.order, G.tangent_dim
+    G = type(spline.control_points)
+    p, d, u, S = _gathered(spline, where)
+    blocks = in_chunks(
+        functools.partial(_jacobian_recursions, G, spline.order, spline.dt), S, p, d, u
+    )
+    return ControlPointJacobians(jnp.broadcast_to(where.segment, S), *blocks)
+
+
+def _jacobian_recursions(
+    G: Any, order: int, dt: float, p: jax.Array, d: jax.Array, u: jax.Array
+) -> Tuple[jax.Array, ...]:
+    """The three Jacobians' blocks from the gathered inputs (``_gathered``), per time."""
+    T, d, lam, S = _segment(G, order, p, d, u)
+    k, n = order, G.tangent_dim
     dtype = d.dtype
     Ainv, T = _steps(T, d, lam)
     # One batched call each over the k − 1 factors.
@@ -472,9 +499,8 @@ def _jacobians(spline: Spline[Any], where: SplineTime) -> ControlPointJacobians:
         Acc = Acc.at[..., pair, :, :].add(
             _ad_blocks(G, dw_rot, ej) + c1 * _ad_blocks(G, w, Dj) + c2 * Dj
         )
-    h = jnp.asarray(spline.dt, dtype)
-    first = jnp.broadcast_to(where.segment, S)
-    return ControlPointJacobians(first, P, V / h, Acc / h**2)
+    h = jnp.asarray(dt, dtype)
+    return P, V / h, Acc / h**2
 
 
 class SplineFit(NamedTuple):
