@@ -504,25 +504,36 @@ def main(argv=None):
     print()
     print(_run.render(HEADER, table_rows(results), args.markdown))
     print()
-    slower = [r for r in results if r["ratio"] is not None and r["ratio"] < 0.95]
-    for r in slower:
-        print(f"slower than the reference: {r['group']} {r['op']} N={fmt_n(r['n'])}")
+    finish(
+        results,
+        args,
+        info,
+        elapsed,
+        f"extended-groups-{args.dtype}",
+        lambda r: f"{r['group']} {r['op']} N={fmt_n(r['n'])}",
+        "the reference",
+    )
+    return 0
+
+
+def finish(results, args, info, elapsed, stem, label, reference):
+    """Print the cases slower than ``reference`` or disagreeing with it (beyond 1e-3 in
+    float32, 1e-8 in float64), the total time; write --json and --save."""
+    for r in results:
+        if r["ratio"] is not None and r["ratio"] < 0.95:
+            print(f"slower than {reference}: {label(r)}")
     tol = 1e-3 if args.dtype == "float32" else 1e-8
     for r in results:
         if r["max_rel_diff"] is not None and not r["max_rel_diff"] < tol:
-            print(
-                f"disagreement beyond {tol:g}: {r['group']} {r['op']} N={fmt_n(r['n'])}: "
-                f"{r['max_rel_diff']:.3g} ({r['check']})"
-            )
+            check = f" ({r['check']})" if "check" in r else ""
+            print(f"disagreement beyond {tol:g}: {label(r)}: {r['max_rel_diff']:.3g}{check}")
     print(f"total benchmark time: {elapsed:.0f} s")
-
     data = {"machine": info, "results": results, "elapsed_s": elapsed}
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(data, f, indent=1, ensure_ascii=False)
     if args.save:
-        save(f"extended-groups-{args.dtype}", data, args)
-    return 0
+        save(stem, data, args)
 
 
 if __name__ == "__main__":

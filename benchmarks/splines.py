@@ -69,7 +69,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import statistics
 import sys
 import time
@@ -80,12 +79,13 @@ import numpy as np
 import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
 from extended_groups import (
     available_bytes,
+    finish,
     footprint_bytes,
     max_rel_diff,
     measure,
     timed_call,
 )
-from report import add_save_arguments, fmt_n, fmt_ns, save
+from report import add_save_arguments, fmt_n, fmt_ns
 
 BENCHMARKS = ("derivatives", "jacobians")
 DEGREES = (3, 5)
@@ -463,24 +463,15 @@ def main(argv=None):
         for side, key in (("ours", "ours_note"), ("autodiff", "reference_note")):
             if r[key]:
                 print(f"{r['benchmark']} degree {r['degree']} N={fmt_n(r['n'])}, {side}: {r[key]}")
-    slower = [r for r in results if r["ratio"] is not None and r["ratio"] < 0.95]
-    for r in slower:
-        print(f"slower than autodiff: {r['benchmark']} degree {r['degree']} N={fmt_n(r['n'])}")
-    tol = 1e-3 if args.dtype == "float32" else 1e-8
-    for r in results:
-        if r["max_rel_diff"] is not None and not r["max_rel_diff"] < tol:
-            print(
-                f"disagreement beyond {tol:g}: {r['benchmark']} degree {r['degree']} "
-                f"N={fmt_n(r['n'])}: {r['max_rel_diff']:.3g}"
-            )
-    print(f"total benchmark time: {elapsed:.0f} s")
-
-    data = {"machine": info, "results": results, "elapsed_s": elapsed}
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, ensure_ascii=False)
-    if args.save:
-        save(f"splines-{args.dtype}", data, args)
+    finish(
+        results,
+        args,
+        info,
+        elapsed,
+        f"splines-{args.dtype}",
+        lambda r: f"{r['benchmark']} degree {r['degree']} N={fmt_n(r['n'])}",
+        "autodiff",
+    )
     return 0
 
 
