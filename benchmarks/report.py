@@ -601,20 +601,32 @@ every element pays every Padé degree and all 16 squarings.\
 """
 
 
-def extended_section(raw: dict, order: list) -> list:
+def _dtype_section(raw: dict, order: list, stem: str, title: str, method: str, table) -> list:
+    """A section of the page from every machine's ``<stem>-float32`` and ``-float64``
+    results: the title, the method text, one table per file."""
     found = [
-        raw[m][f"extended-groups-{dt}"]
+        raw[m][f"{stem}-{dt}"]
         for m in order
         for dt in ("float32", "float64")
-        if f"extended-groups-{dt}" in raw[m]
+        if f"{stem}-{dt}" in raw[m]
     ]
     if not found:
         return []
-    lines = ["## Sim(3) and SE₂(3) against matrix references", ""]
-    lines += EXTENDED_METHOD.splitlines() + [""]
+    lines = [f"## {title}", ""] + method.splitlines() + [""]
     for data in found:
-        lines += _extended_table(data)
+        lines += table(data)
     return lines
+
+
+def extended_section(raw: dict, order: list) -> list:
+    return _dtype_section(
+        raw,
+        order,
+        "extended-groups",
+        "Sim(3) and SE₂(3) against matrix references",
+        EXTENDED_METHOD,
+        _extended_table,
+    )
 
 
 def _extended_table(data: dict) -> list:
@@ -722,19 +734,14 @@ compiled but not run.\
 
 
 def splines_section(raw: dict, order: list) -> list:
-    found = [
-        raw[m][f"splines-{dt}"]
-        for m in order
-        for dt in ("float32", "float64")
-        if f"splines-{dt}" in raw[m]
-    ]
-    if not found:
-        return []
-    lines = ["## Cumulative B-splines against autodiff", ""]
-    lines += SPLINES_METHOD.splitlines() + [""]
-    for data in found:
-        lines += _splines_table(data)
-    return lines
+    return _dtype_section(
+        raw,
+        order,
+        "splines",
+        "Cumulative B-splines against autodiff",
+        SPLINES_METHOD,
+        _splines_table,
+    )
 
 
 def _splines_table(data: dict) -> list:
