@@ -12,6 +12,7 @@ from . import interop as interop
 from . import jacobians as jacobians
 from . import manifold as manifold
 from . import motion as motion
+from . import pose_graph as pose_graph
 from . import splines as splines
 from . import uncertainty as uncertainty
 from . import utils as utils
@@ -55,6 +56,7 @@ __all__ = [
     "jacobians",
     "manifold",
     "motion",
+    "pose_graph",
     "splines",
     "uncertainty",
     "utils",

@@ -1,0 +1,120 @@
+"""The pose graph: vertices, relative-pose edges and their information matrices.
+
+A leaf module: plain NumPy containers on the host, float64, no JAX tracing. The solver
+converts them to device arrays once per solve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Literal, Union, cast
+
+import numpy as onp
+
+from .._se2 import SE2
+from .._se3 import SE3
+
+Pose = Union[SE2, SE3]
+
+#: Width of one pose in the vertex layout: SE2 (x, y, θ), SE3 (x, y, z, qx, qy, qz, qw).
+POSE_WIDTH = {2: 3, 3: 7}
+#: Tangent dimension: SE2 (vx, vy, ω), SE3 (vx, vy, vz, ωx, ωy, ωz).
+TANGENT_DIM = {2: 3, 3: 6}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PoseGraph:
+    """Poses and relative-pose measurements between them, as read from a file.
+
+    Arrays are NumPy float64 (int64 for indices), on the host. Poses and measurements are
+    stored in the vertex layout of the g2o format, so that reading and writing are exact:
+
+    - 2D (SE2): ``(x, y, θ)``, shape ``(·, 3)``;
+    - 3D (SE3): ``(x, y, z, qx, qy, qz, qw)``, shape ``(·, 7)``, unit quaternion.
+
+    Attributes:
+        dim: 2 or 3.
+        ids: ``(N,)`` int64, the vertex ids used in the file, in the order of ``poses``.
+        poses: ``(N, 3)`` or ``(N, 7)``, the estimate T_world_i of every vertex.
+        edges: ``(E, 2)`` int64, indices ``(i, j)`` into ``poses`` (not ids).
+        measurements: ``(E, 3)`` or ``(E, 7)``, Z_ij, the measured pose of j in the frame
+            of i: Z_ij ≈ T_world_i⁻¹ T_world_j.
+        information: ``(E, k, k)``, symmetric positive definite, on this library's tangent
+            of the residual r_ij = log(Z_ij⁻¹ T_world_i⁻¹ T_world_j): SE2 ``(vx, vy, ω)``,
+            SE3 ``(vx, vy, vz, ωx, ωy, ωz)`` (translation first), k = 3 or 6.
+    """
+
+    dim: Literal[2, 3]
+    ids: onp.ndarray
+    poses: onp.ndarray
+    edges: onp.ndarray
+    measurements: onp.ndarray
+    information: onp.ndarray
+
+    def __post_init__(self) -> None:
+        if self.dim not in (2, 3):
+            raise ValueError(f"PoseGraph: dim must be 2 or 3, got {self.dim!r}")
+        w, k = POSE_WIDTH[self.dim], TANGENT_DIM[self.dim]
+        n, e = len(self.ids), len(self.edges)
+        expected = {
+            "ids": (self.ids, (n,)),
+            "poses": (self.poses, (n, w)),
+            "edges": (self.edges, (e, 2)),
+            "measurements": (self.measurements, (e, w)),
+            "information": (self.information, (e, k, k)),
+        }
+        for name, (array, shape) in expected.items():
+            if not isinstance(array, onp.ndarray) or array.shape != shape:
+                got = getattr(array, "shape", type(array).__name__)
+                raise ValueError(
+                    f"PoseGraph.{name}: expected a NumPy array of shape {shape}, got {got}"
+                )
+        if e and (self.edges.min() < 0 or self.edges.max() >= n):
+            raise ValueError(
+                f"PoseGraph.edges: indices must lie in [0, {n}), "
+                f"got {self.edges.min()}..{self.edges.max()}"
+            )
+
+    @property
+    def group(self) -> type[SE2] | type[SE3]:
+        """SE2 for a 2D graph, SE3 for a 3D one."""
+        return SE2 if self.dim == 2 else SE3
+
+    @property
+    def num_poses(self) -> int:
+        return len(self.ids)
+
+    @property
+    def num_edges(self) -> int:
+        return len(self.edges)
+
+    def pose_group(self) -> Pose:
+        """The poses as a group element of batch ``(N,)`` (JAX arrays, default float dtype)."""
+        return to_group(self.dim, self.poses)
+
+    def measurement_group(self) -> Pose:
+        """The measurements as a group element of batch ``(E,)``."""
+        return to_group(self.dim, self.measurements)
+
+    def with_poses(self, poses: Pose | onp.ndarray) -> PoseGraph:
+        """The same graph with other pose estimates (a group element of batch ``(N,)`` or an
+        array in the vertex layout), e.g. a solver's result, ready to be written."""
+        array = poses if isinstance(poses, onp.ndarray) else from_group(poses)
+        return dataclasses.replace(self, poses=onp.asarray(array, dtype=onp.float64))
+
+
+def to_group(dim: int, rows: onp.ndarray) -> Pose:
+    """Vertex-layout rows ``(·, 3)`` / ``(·, 7)`` to SE2 / SE3."""
+    if dim == 2:
+        x, y, theta = rows[..., 0], rows[..., 1], rows[..., 2]
+        return SE2(cast(Any, onp.stack([onp.cos(theta), onp.sin(theta), x, y], axis=-1)))
+    xyz, q = rows[..., :3], rows[..., 3:]
+    return SE3(cast(Any, onp.concatenate([q[..., 3:], q[..., :3], xyz], axis=-1)))
+
+
+def from_group(pose: Pose) -> onp.ndarray:
+    """SE2 / SE3 to vertex-layout rows, float64."""
+    p = onp.asarray(pose.parameters(), dtype=onp.float64)
+    if isinstance(pose, SE2):
+        return onp.stack([p[..., 2], p[..., 3], onp.arctan2(p[..., 1], p[..., 0])], axis=-1)
+    return onp.concatenate([p[..., 4:], p[..., 1:4], p[..., :1]], axis=-1)
