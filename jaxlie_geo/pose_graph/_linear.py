@@ -128,9 +128,9 @@ class SparseCholesky:
         damped[pat.diagonal] += damping
         matrix = self._csc((damped, pat.indices, pat.indptr), shape=(pat.size, pat.size))
         if self._solver is None:
-            self._solver = self._qdldl.Solver(matrix)
+            self._solver = self._qdldl.Solver(matrix, upper=True)
         else:
-            self._solver.update(matrix)
+            self._solver.update(matrix, upper=True)
         return -self._solver.solve(g)
 
 
