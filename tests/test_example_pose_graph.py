@@ -4,7 +4,10 @@ The subprocess test reads the printed report: the analytic-vs-autodiff Jacobian 
 cost at every Levenberg–Marquardt iteration (never increasing), the errors against ground
 truth before and after, and the figure. The in-process tests import the example (it is not
 a package) and check the Jacobians at large angles, the gradient of the normal equations
-against autodiff, exact recovery from noise-free measurements, and Gauss–Newton.
+against autodiff, exact recovery from noise-free measurements, and Gauss–Newton. The last
+two run ``main(["--file", ...])`` in-process on small g2o (2D) and TORO (3D) files written
+here, with measurements drawn from the noise their information states, and check the report,
+the χ² expectation at the optimum, the picture and the written graph.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 import pytest
 from conftest import over_se_groups
 
-from jaxlie_geo import manifold
+from jaxlie_geo import SE2, SE3, SO3, manifold, pose_graph
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "examples" / "pose_graph.py"
@@ -217,3 +220,133 @@ def test_gauss_newton_and_lm(pg: ModuleType, small_graphs) -> None:
         before = pg.trajectory_errors(graph.T_world_body_odom, graph.T_world_body_true)
         after = pg.trajectory_errors(lm.T_world_body, graph.T_world_body_true)
         assert float(after[0]) < float(before[0]) and float(after[1]) < float(before[1])
+
+
+# ---------------------------------------------------------------------------------------
+# --file: a pose graph read from a g2o or TORO file and solved by jaxlie_geo.pose_graph.
+
+
+def _write_square_loop_g2o(path: Path, seed: int = 0, side: int = 8, laps: int = 2) -> int:
+    """A robot drives twice around a square of ``side`` one-metre steps (left turns at the
+    corners): g2o 2D, 64 poses, odometry plus a loop closure from each pose of the second lap
+    to the same place on the first. Measurements Z_ij = T_i⁻¹ T_j exp(n), n ~ N(0, Σ) on
+    (vx, vy, ω), information Σ⁻¹. The vertices hold the odometry chained with a heading bias
+    of 0.03 rad a step (a biased gyroscope): far from the optimum. Returns the χ² degrees of
+    freedom (E − N + 1)·3."""
+    rng = np.random.default_rng(seed)
+    sigma = np.array([0.05, 0.05, 0.02])
+    n = 4 * side * laps
+    turn = np.where(np.arange(1, n) % side == 0, np.pi / 2, 0.0)
+    step = SE2.from_xy_theta(jnp.ones(n - 1), jnp.zeros(n - 1), jnp.asarray(turn))
+    poses = [SE2.identity()]
+    for k in range(n - 1):
+        poses.append(poses[-1] @ step[k])
+    T = SE2(jnp.stack([p.parameters() for p in poses]))
+    i = np.concatenate([np.arange(n - 1), np.arange(n - 4 * side)])
+    j = np.concatenate([np.arange(1, n), np.arange(4 * side, n)])
+    Z = T[i].inverse() @ T[j] @ SE2.exp(jnp.asarray(rng.normal(size=(len(i), 3)) * sigma))
+    z = np.column_stack([np.asarray(Z.translation()), np.asarray(Z.rotation().log())[:, 0]])
+    initial = [np.zeros(3)]
+    for dx, dy, dtheta in z[: n - 1]:
+        x, y, theta = initial[-1]
+        c, s = np.cos(theta), np.sin(theta)
+        initial.append(np.array([x + c * dx - s * dy, y + s * dx + c * dy, theta + dtheta + 0.03]))
+    info = np.diag(1.0 / sigma**2)[np.triu_indices(3)]  # Ω11 Ω12 Ω13 Ω22 Ω23 Ω33
+    lines = [
+        f"VERTEX_SE2 {k} " + " ".join(map(repr, pose))
+        for k, pose in enumerate(np.array(initial).tolist())
+    ]
+    lines += [
+        f"EDGE_SE2 {a} {b} " + " ".join(map(repr, [*zab, *info.tolist()]))
+        for a, b, zab in zip(i.tolist(), j.tolist(), z.tolist())
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    return (len(i) - n + 1) * 3
+
+
+def _write_helix_toro3d(path: Path, seed: int = 0, turns: int = 3, per_turn: int = 12) -> int:
+    """Three turns of a helix, 36 SE(3) poses, as a TORO 3D file of ``EDGE3`` records only
+    (like sphere2500: the reader chains the odometry for the initial estimate); a loop
+    closure from each pose to the one a turn below. Noise as above, σ = 5 cm and 0.02 rad;
+    Euler angles R = Rz(yaw) Ry(pitch) Rx(roll), information over (x, y, z, roll, pitch,
+    yaw), translation first. Returns the χ² degrees of freedom (E − N + 1)·6."""
+    rng = np.random.default_rng(seed)
+    sigma = np.array([0.05] * 3 + [0.02] * 3)
+    n = turns * per_turn
+    a = 2 * np.pi * np.arange(n) / per_turn
+    R = SO3.from_rpy_radians(jnp.zeros(n), jnp.full(n, -0.1), jnp.asarray(a + np.pi / 2))
+    p = np.column_stack([3 * np.cos(a), 3 * np.sin(a), 0.3 * a])
+    T = SE3.from_rotation_and_translation(R, jnp.asarray(p))
+    i = np.concatenate([np.arange(n - 1), np.arange(n - per_turn)])
+    j = np.concatenate([np.arange(1, n), np.arange(per_turn, n)])
+    Z = T[i].inverse() @ T[j] @ SE3.exp(jnp.asarray(rng.normal(size=(len(i), 6)) * sigma))
+    rpy = np.column_stack([np.asarray(angle) for angle in Z.rotation().as_rpy_radians()])
+    z = np.column_stack([np.asarray(Z.translation()), rpy])
+    info = np.diag(1.0 / sigma**2)[np.triu_indices(6)]  # row by row
+    lines = [
+        f"EDGE3 {a} {b} " + " ".join(map(repr, [*zab, *info.tolist()]))
+        for a, b, zab in zip(i.tolist(), j.tolist(), z.tolist())
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    return (len(i) - n + 1) * 6
+
+
+def _run_file(pg: ModuleType, capsys, argv: List[str]) -> Dict[str, object]:
+    """``main(argv)`` in-process; its printed report and what it returned."""
+    result = pg.main(argv)
+    out, err = capsys.readouterr()
+    initial = re.search(r"initial cost (\S+)", out)
+    final = re.search(r"final cost (\S+) after (\d+) iterations, (\S+) s", out)
+    assert initial and final, out
+    solution = result["solution"]
+    assert float(initial.group(1)) == pytest.approx(solution.costs[0], rel=1e-8)
+    assert float(final.group(1)) == pytest.approx(solution.costs[-1], rel=1e-8)
+    assert int(final.group(2)) == solution.iterations
+    # One progress line per iteration on stderr (no terminal: one line each), and the reason.
+    progress = re.findall(r"iteration\s+(\d+)\s+cost (\S+)", err)
+    assert [int(k) for k, _ in progress] == list(range(solution.iterations + 1)), err
+    assert f"stopped: {solution.stop_reason}" in out
+    return dict(result, out=out, err=err)
+
+
+def _check_png(png: Path) -> None:
+    assert png.is_file()
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(data) > 20_000
+
+
+def test_file_g2o_2d(pg: ModuleType, tmp_path: Path, capsys) -> None:
+    """``--file square.g2o``: LM from a badly biased start converges to the χ² expectation,
+    the picture is written, and ``--write`` stores the optimised poses (reading the file back
+    gives the final cost)."""
+    path, png, written = tmp_path / "square.g2o", tmp_path / "pic" / "sq.png", tmp_path / "o.g2o"
+    dof = _write_square_loop_g2o(path)
+    run = _run_file(pg, capsys, ["--file", str(path), "--out", str(png), "--write", str(written)])
+    costs = run["solution"].costs
+    assert run["solution"].converged, run["out"]
+    assert "64 poses, 95 edges (63 between consecutive poses, 32 others)" in run["out"]
+    assert all(b <= a for a, b in zip(costs, costs[1:])), costs
+    assert costs[-1] < 1e-3 * costs[0], costs
+    # 2F at the optimum: chi-square with (E - N + 1)k = 96 dof; within 4 standard deviations.
+    assert run["dof"] == dof == 96
+    assert abs(costs[-1] - dof / 2) < 4 * np.sqrt(dof / 2), (costs[-1], dof)
+    _check_png(png)
+    back = pose_graph.read(written)
+    assert back.num_poses == 64 and back.num_edges == 95
+    assert pose_graph.graph_cost(back) == pytest.approx(costs[-1], rel=1e-6)
+
+
+def test_file_toro_3d(pg: ModuleType, tmp_path: Path, capsys) -> None:
+    """``--file helix.graph`` (TORO 3D, edges only) with Gauss-Newton and PCG: from the
+    chained odometry to the χ² expectation; the 3D picture is drawn."""
+    path, png = tmp_path / "helix.graph", tmp_path / "helix.png"
+    dof = _write_helix_toro3d(path)
+    argv = ["--file", str(path), "--out", str(png), "--method", "gn", "--linear-solver", "pcg"]
+    run = _run_file(pg, capsys, argv)
+    costs = run["solution"].costs
+    assert "3D pose graph (SE3), 36 poses, 59 edges" in run["out"]
+    assert costs[-1] < 0.2 * costs[0], costs
+    assert run["dof"] == dof == 144
+    assert abs(costs[-1] - dof / 2) < 4 * np.sqrt(dof / 2), (costs[-1], dof)
+    _check_png(png)
