@@ -127,6 +127,26 @@ def plot(runs: list, out: Path) -> None:
     print(f"wrote {out}")
 
 
+def plot_pose_graphs(data: dict, out: Path) -> None:
+    """Cost against wall time for GTSAM and ours, one panel per dataset
+    (``raw/<machine>/pose-graphs.json``), into the PNG ``out``."""
+    res = data["results"]
+    fig, axes = plt.subplots(1, len(res), figsize=(3.2 * len(res), 3.2), squeeze=False)
+    for ax, r in zip(axes[0], res):
+        ax.plot(r["gtsam_times"], r["gtsam_costs"], "o-", ms=3, label="GTSAM", color="#dd8452")
+        ax.plot(r["ours_times"], r["ours_costs"], "s-", ms=3, label="jaxlie_geo", color="#4c72b0")
+        ax.set_yscale("log")
+        ax.set_title(r["dataset"], fontsize=9)
+        ax.set_xlabel("seconds")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("cost")
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle(f"Pose graphs, {report.label(data['machine'])}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(

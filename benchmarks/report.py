@@ -10,6 +10,7 @@ The raw results are JSON files, one per machine and table::
     benchmarks/raw/<machine>/extended-groups-<dtype>.json
                                                      extended_groups.py --save
     benchmarks/raw/<machine>/splines-<dtype>.json   splines.py --save
+    benchmarks/raw/<machine>/pose-graphs.json       pose_graphs.py --save
     benchmarks/raw/<machine>/baseline-speed-<dtype>.json
                                                      run.py --json of an earlier commit,
                                                      with a "change" entry: the page shows
@@ -39,6 +40,7 @@ HERE = Path(__file__).resolve().parent
 RAW_DIR = HERE / "raw"
 PAGE = HERE / "RESULTS.md"
 PLOT_NAME = "results.png"
+POSE_GRAPH_PLOT = "pose_graphs.png"
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3")
 OPS = ("exp", "log", "compose", "apply", "inverse", "interpolate", "grad")
@@ -947,6 +949,83 @@ def _accuracy_tables(data: dict) -> list:
     return lines
 
 
+POSE_GRAPHS_METHOD = """\
+Method (`pose_graphs.py`): the public datasets that ship in the `gtsam` wheel, read by
+`jaxlie_geo.pose_graph.read`; GTSAM's factor graph is built from that same reading
+(`BetweenFactorPose2/3`, `noiseModel.Gaussian.Information` with the information moved to
+GTSAM's (ω, v) order for Pose3, and a `PriorFactor` of σ = 1e-6 on the first pose, as
+`solve`'s anchor), so both minimise ½ Σ ‖log(Z⁻¹ Tᵢ⁻¹ Tⱼ)‖²_Ω from the same initial
+estimate (the file's vertices, or the chained odometry where it has none). Final costs are
+GTSAM's `graph.error` of each side's estimate (our own cost function agrees to rounding).
+GTSAM: `LevenbergMarquardtOptimizer`, default parameters (λI damping, relative and absolute
+tolerances 1e-5, at most 100 iterations), timed `optimize()`. Ours: `pose_graph.solve` with
+its defaults (Levenberg–Marquardt, λI damping, QDLDL sparse LDLᵀ on the host, relative
+tolerance 1e-7, float64), run twice: "first call" includes tracing and compiling, the other
+times are the second call's. "sphere2500, load3D's blocks" swaps the 3 × 3 blocks of every
+information matrix, the reading of GTSAM's own `load3D`, which puts the first block of a
+TORO `EDGE3` matrix on rotation (TORO and HOG-Man put translation first).\
+"""
+
+
+def pose_graphs_section(raw: dict, order: list) -> list:
+    found = [raw[m]["pose-graphs"] for m in order if "pose-graphs" in raw[m]]
+    if not found:
+        return []
+    lines = ["## Pose graphs against GTSAM", ""] + POSE_GRAPHS_METHOD.splitlines() + [""]
+    for data in found:
+        info, res = data["machine"], data["results"]
+        header = [
+            "dataset",
+            "poses",
+            "edges",
+            "initial cost",
+            "GTSAM final (iterations)",
+            "ours final (iterations)",
+            "ours ≤ GTSAM × (1 + 10⁻⁶)",
+            "GTSAM time",
+            "ours time",
+            "ours, first call",
+            "ours / GTSAM time",
+        ]
+        body = [
+            [
+                r["dataset"],
+                f"{r['poses']:,}",
+                f"{r['edges']:,}",
+                f"{r['initial_cost_gtsam']:.4g}",
+                f"{r['gtsam_final']:.9g} ({r['gtsam_iterations']})",
+                f"{r['ours_final_in_gtsam']:.9g} ({r['ours_iterations']})",
+                "yes" if r["reaches_gtsam"] else "**no**",
+                f"{r['gtsam_s']:.2f} s",
+                f"{r['ours_s']:.2f} s",
+                f"{r['ours_cold_s']:.2f} s",
+                f"{r['time_ratio']:.2f}",
+            ]
+            for r in res
+        ]
+        lines += [
+            f"### {label(info)}",
+            "",
+            f"jax {info.get('jax', '?')}, GTSAM {info.get('gtsam', '?')}, qdldl "
+            f"{info.get('qdldl', '?')}, measured {_date(info)}.",
+            "",
+        ]
+        lines += table(header, body, "lrrrrrlrrrr") + [""]
+        per_it = ", ".join(
+            f"{r['dataset']} {1e3 * r['gtsam_s'] / max(r['gtsam_iterations'], 1):.0f} / "
+            f"{1e3 * r['ours_s'] / max(r['ours_iterations'], 1):.0f} ms"
+            for r in res
+        )
+        lines += [f"Per iteration, GTSAM / ours: {per_it}.", ""]
+    lines += [
+        f"![Cost against time, GTSAM and ours, per dataset]({POSE_GRAPH_PLOT})",
+        "",
+        "*Cost against wall time (second call), one panel per dataset.*",
+        "",
+    ]
+    return lines
+
+
 def render(raw: dict, plot_name: str | None) -> str:
     """The page's Markdown for the raw results ``raw`` (see ``load``)."""
     order = machine_order(raw)
@@ -967,6 +1046,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += jacobians_section(raw, order)
     lines += extended_section(raw, order)
     lines += splines_section(raw, order)
+    lines += pose_graphs_section(raw, order)
     lines += change_section(raw, order)
     lines += accuracy_section(raw, order)
     while lines and lines[-1] == "":
@@ -994,6 +1074,9 @@ def write_page(raw_dir: Path = RAW_DIR, page: Path = PAGE, plot: bool = True) ->
             print(f"plot not redrawn ({e})", file=sys.stderr)
         else:
             _plot.plot(runs, page.parent / PLOT_NAME)
+            graphs = [raw[m]["pose-graphs"] for m in machine_order(raw) if "pose-graphs" in raw[m]]
+            if graphs:
+                _plot.plot_pose_graphs(graphs[0], page.parent / POSE_GRAPH_PLOT)
     page.write_text(render(raw, PLOT_NAME), encoding="utf-8")
     print(f"wrote {page}")
 

@@ -1,0 +1,211 @@
+#!/usr/bin/env python
+"""Pose graphs: ``jaxlie_geo.pose_graph.solve`` beside GTSAM's Levenberg–Marquardt.
+
+The public datasets that ship in the ``gtsam`` wheel (``gtsam.findExampleDataFile``):
+w10000 (TORO 2D), sphere2500 (TORO 3D, edges only), pose3example-grid (g2o 3D) and w20000
+(TORO 2D tags with g2o's information order, edges only). Each file is read by
+``jaxlie_geo.pose_graph.read``; GTSAM's factor graph is built from that same reading
+(``BetweenFactorPose2/3`` with ``noiseModel.Gaussian.Information``, the information moved
+from this library's (v, ω) tangent to GTSAM's (ω, v) for Pose3, and a ``PriorFactor`` with
+σ = 1e-6 on the first pose, as ``solve``'s anchor), so both minimise the same cost from the
+same initial estimate (the file's vertices, or the chained odometry). Each final estimate
+is evaluated by both cost functions (they agree to rounding).
+
+GTSAM runs ``LevenbergMarquardtOptimizer`` with its default parameters (λ₀ = 1e-5, λI
+damping, relative and absolute error tolerances 1e-5, at most 100 iterations): its time is
+that of ``optimize()``; its cost-versus-time curve comes from a second run, one
+``iterate()`` at a time. Ours runs ``solve`` with its defaults (Levenberg–Marquardt, QDLDL
+on the host, relative tolerance 1e-7): once cold (tracing and compiling included) and then warm;
+the curve and the times in the table are the warm run's, the cold time is listed beside.
+
+A second reading of sphere2500 is also solved, with the information's diagonal blocks
+swapped: GTSAM's own ``load3D`` puts the first 3 × 3 block of a TORO ``EDGE3`` matrix on
+rotation, where TORO and HOG-Man put translation first.
+
+Usage:
+  python benchmarks/pose_graphs.py                 # print the table
+  python benchmarks/pose_graphs.py --save          # and replace this machine's raw file
+  python benchmarks/pose_graphs.py --datasets w10000 sphere2500
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+
+import numpy as np
+import run as _run  # benchmarks/run.py: machine facts; also puts the repo root on sys.path
+from report import add_save_arguments, save
+
+from jaxlie_geo import pose_graph
+
+#: name: (file in gtsam's data folder, read's keyword arguments, swap the 3D blocks)
+DATASETS = {
+    "w10000": ("w10000", {}, False),
+    "sphere2500": ("sphere2500", {}, False),
+    "sphere2500, load3D's blocks": ("sphere2500", {}, True),
+    "pose3example-grid": ("pose3example-grid", {}, False),
+    "w20000": ("w20000", {"information_order": "g2o"}, False),
+}
+ANCHOR_SIGMA = 1e-6
+
+
+def swap_blocks(information: np.ndarray) -> np.ndarray:
+    """(v, ω) blocks exchanged: the matrix as read in the other block order."""
+    order = [3, 4, 5, 0, 1, 2]
+    return information[:, order][:, :, order]
+
+
+def to_gtsam(graph: pose_graph.PoseGraph):
+    """The same cost as a GTSAM factor graph and its initial values."""
+    import gtsam
+
+    factors, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    if graph.dim == 2:
+        pose = lambda r: gtsam.Pose2(r[0], r[1], r[2])  # noqa: E731
+        between, prior = gtsam.BetweenFactorPose2, gtsam.PriorFactorPose2
+        order = [0, 1, 2]
+    else:
+        # Files store quaternions to a few digits; both sides use them normalised.
+        unit = lambda q: q / np.linalg.norm(q)  # noqa: E731
+        pose = (
+            lambda r: gtsam.Pose3(  # noqa: E731
+                gtsam.Rot3.Quaternion(*unit(np.asarray([r[6], r[3], r[4], r[5]]))),
+                np.asarray(r[:3]),
+            )
+        )
+        between, prior = gtsam.BetweenFactorPose3, gtsam.PriorFactorPose3
+        order = [3, 4, 5, 0, 1, 2]  # GTSAM's Pose3 tangent is (ω, v)
+    ids = [int(i) for i in graph.ids]
+    for key, row in zip(ids, graph.poses):
+        values.insert(key, pose(row))
+    for (i, j), z, info in zip(graph.edges, graph.measurements, graph.information):
+        model = gtsam.noiseModel.Gaussian.Information(info[np.ix_(order, order)])
+        factors.add(between(ids[i], ids[j], pose(z), model))
+    k = len(order)
+    anchor = gtsam.noiseModel.Diagonal.Sigmas(np.full(k, ANCHOR_SIGMA))
+    factors.add(prior(ids[0], pose(graph.poses[0]), anchor))
+    return factors, values
+
+
+def from_gtsam(graph: pose_graph.PoseGraph, values) -> pose_graph.PoseGraph:
+    rows = []
+    for key in graph.ids:
+        if graph.dim == 2:
+            p = values.atPose2(int(key))
+            rows.append([p.x(), p.y(), p.theta()])
+        else:
+            p = values.atPose3(int(key))
+            q = p.rotation().toQuaternion()
+            rows.append([*p.translation(), q.x(), q.y(), q.z(), q.w()])
+    return graph.with_poses(np.asarray(rows))
+
+
+def run_gtsam(factors, values) -> dict:
+    import gtsam
+
+    params = gtsam.LevenbergMarquardtParams()
+    start = time.perf_counter()
+    optimizer = gtsam.LevenbergMarquardtOptimizer(factors, values, params)
+    result = optimizer.optimize()
+    elapsed = time.perf_counter() - start
+    iterations = optimizer.iterations()
+    # The curve: the same optimiser again, one iteration at a time.
+    optimizer = gtsam.LevenbergMarquardtOptimizer(factors, values, params)
+    costs, times = [factors.error(values)], [0.0]
+    start = time.perf_counter()
+    for _ in range(iterations):
+        optimizer.iterate()
+        times.append(time.perf_counter() - start)
+        costs.append(optimizer.error())
+    return {
+        "result": result,
+        "time_s": elapsed,
+        "iterations": iterations,
+        "final_cost": factors.error(result),
+        "costs": costs,
+        "times": times,
+    }
+
+
+def run_dataset(name: str, gtsam_module) -> dict:
+    file, kwargs, swap = DATASETS[name]
+    path = gtsam_module.findExampleDataFile(file)
+    start = time.perf_counter()
+    graph = pose_graph.read(path, **kwargs)
+    read_s = time.perf_counter() - start
+    if swap:
+        graph = dataclasses.replace(graph, information=swap_blocks(graph.information))
+    factors, values = to_gtsam(graph)
+    initial = pose_graph.graph_cost(graph, anchor_sigma=ANCHOR_SIGMA)
+    gt = run_gtsam(factors, values)
+    cold = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA)
+    warm = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA)
+    gtsam_graph = from_gtsam(graph, gt["result"])
+    ours_in_gtsam = factors.error(to_gtsam(warm.graph)[1])
+    gtsam_in_ours = pose_graph.graph_cost(gtsam_graph, anchor_sigma=ANCHOR_SIGMA)
+    row = {
+        "dataset": name,
+        "file": file
+        + ("" if not kwargs else f" ({', '.join(f'{k}={v!r}' for k, v in kwargs.items())})"),
+        "dim": graph.dim,
+        "poses": graph.num_poses,
+        "edges": graph.num_edges,
+        "read_s": read_s,
+        "initial_cost": initial,
+        "initial_cost_gtsam": factors.error(values),
+        "gtsam_final": gt["final_cost"],
+        "gtsam_final_in_ours": gtsam_in_ours,
+        "gtsam_iterations": gt["iterations"],
+        "gtsam_s": gt["time_s"],
+        "gtsam_costs": gt["costs"],
+        "gtsam_times": gt["times"],
+        "ours_final": float(warm.costs[-1]),
+        "ours_final_in_gtsam": ours_in_gtsam,
+        "ours_iterations": warm.iterations,
+        "ours_s": warm.time,
+        "ours_cold_s": cold.time,
+        "ours_costs": warm.costs.tolist(),
+        "ours_times": warm.times.tolist(),
+        "ours_stop": warm.stop_reason,
+        "ratio_final": ours_in_gtsam / gt["final_cost"],
+        "reaches_gtsam": bool(ours_in_gtsam <= gt["final_cost"] * (1 + 1e-6)),
+        "time_ratio": warm.time / gt["time_s"],
+    }
+    print(
+        f"{name:30s} N={row['poses']:6d} E={row['edges']:6d}  initial {initial:.6e}  "
+        f"GTSAM {gt['final_cost']:.9g} in {gt['iterations']} its, {gt['time_s']:.2f} s  |  "
+        f"ours {row['ours_final']:.9g} (GTSAM's cost of it {ours_in_gtsam:.9g}) in "
+        f"{warm.iterations} its, {warm.time:.2f} s warm, {cold.time:.2f} s cold  "
+        f"{'≤' if row['reaches_gtsam'] else '>'} GTSAM × (1 + 1e-6)",
+        flush=True,
+    )
+    return row
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--datasets", nargs="+", choices=list(DATASETS), default=list(DATASETS))
+    add_save_arguments(parser)
+    args = parser.parse_args(argv)
+    import gtsam
+
+    start = time.perf_counter()
+    rows = [run_dataset(name, gtsam) for name in args.datasets]
+    info = _run.machine_info(
+        "benchmarks/pose_graphs.py",
+        dtype="float64",
+        gtsam=_run.version_of("gtsam"),
+        qdldl=_run.version_of("qdldl"),
+    )
+    elapsed = time.perf_counter() - start
+    print(f"total benchmark time: {elapsed:.0f} s")
+    if args.save:
+        save("pose-graphs", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
