@@ -360,6 +360,8 @@ def test_gauss_newton_and_levenberg_marquardt_with_cholesky_and_pcg_agree(dim: i
         np.testing.assert_allclose(solution.costs[-1], want.costs[-1], rtol=1e-8, err_msg=name)
         np.testing.assert_allclose(_matrices(solution), _matrices(want), atol=1e-7, err_msg=name)
     assert _solved(dim, tolerance=TIGHT).costs[-1] == want.costs[-1]  # "auto": Cholesky on a CPU
+    one_device = solve(_case(dim).graph, tolerance=TIGHT, devices=jax.devices()[:1])
+    assert one_device.costs[-1] == want.costs[-1]
 
 
 @over_dims
@@ -596,6 +598,23 @@ def test_errors() -> None:
     information[7] = np.zeros((3, 3))
     with pytest.raises(ValueError, match="not positive definite"):
         solve(dataclasses.replace(graph, information=information))
+    edges = graph.edges.copy()
+    edges[:, 1] = np.where(edges[:, 1] == 5, 4, edges[:, 1])  # nothing reaches pose 5
+    edges[:, 0] = np.where(edges[:, 0] == 5, 3, edges[:, 0])
+    edges[edges[:, 0] == edges[:, 1], 1] = 6
+    with pytest.raises(ValueError, match="pose 5 .*not joined"):
+        solve(dataclasses.replace(graph, edges=edges))
+    for field, value, match in [
+        ("information", np.triu(graph.information + 1.0), "edge 0 is not symmetric"),
+        ("poses", np.where(np.arange(graph.num_poses)[:, None] == 2, np.inf, graph.poses),
+         "poses: a non-finite value in row 2"),
+        ("edges", graph.edges.astype(float), "edges: expected numbers"),
+        ("measurements", graph.measurements[:-1], "measurements: expected shape"),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            dataclasses.replace(graph, **{field: value})
+    as_lists = dataclasses.replace(graph, poses=graph.poses.astype(np.float32).tolist())
+    assert as_lists.poses.dtype == np.float64 and as_lists.poses.shape == graph.poses.shape
     edges = graph.edges.copy()
     edges[3] = [4, 4]
     with pytest.raises(ValueError, match="itself"):

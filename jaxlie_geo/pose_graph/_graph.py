@@ -26,7 +26,9 @@ TANGENT_DIM = {2: 3, 3: 6}
 class PoseGraph:
     """Poses and relative-pose measurements between them, as read from a file.
 
-    Arrays are NumPy float64 (int64 for indices), on the host. Poses and measurements are
+    Arrays are NumPy float64 (int64 for indices), on the host; the constructor converts
+    array-likes to them and checks shapes, finiteness and the symmetry of the information
+    (to 1e-12 of its largest entry), raising ``ValueError``. Poses and measurements are
     stored in the vertex layout of the g2o format, so that reading and writing are exact:
 
     - 2D (SE2): ``(x, y, θ)``, shape ``(·, 3)``;
@@ -55,25 +57,33 @@ class PoseGraph:
         if self.dim not in (2, 3):
             raise ValueError(f"PoseGraph: dim must be 2 or 3, got {self.dim!r}")
         w, k = POSE_WIDTH[self.dim], TANGENT_DIM[self.dim]
+        kinds = {"ids": "i", "poses": "f", "edges": "i", "measurements": "f", "information": "f"}
+        for name, kind in kinds.items():  # integers to int64, reals to float64
+            array = onp.asarray(getattr(self, name))
+            if array.dtype.kind not in ("iu" if kind == "i" else "iuf"):
+                raise ValueError(f"PoseGraph.{name}: expected numbers, got dtype {array.dtype}")
+            target = onp.int64 if kind == "i" else onp.float64
+            object.__setattr__(self, name, onp.asarray(array, dtype=target))
         n, e = len(self.ids), len(self.edges)
-        expected = {
-            "ids": (self.ids, (n,)),
-            "poses": (self.poses, (n, w)),
-            "edges": (self.edges, (e, 2)),
-            "measurements": (self.measurements, (e, w)),
-            "information": (self.information, (e, k, k)),
-        }
-        for name, (array, shape) in expected.items():
-            if not isinstance(array, onp.ndarray) or array.shape != shape:
-                got = getattr(array, "shape", type(array).__name__)
-                raise ValueError(
-                    f"PoseGraph.{name}: expected a NumPy array of shape {shape}, got {got}"
-                )
+        shapes = {"ids": (n,), "poses": (n, w), "edges": (e, 2), "measurements": (e, w)}
+        shapes["information"] = (e, k, k)
+        for name, shape in shapes.items():
+            array = getattr(self, name)
+            if array.shape != shape:
+                raise ValueError(f"PoseGraph.{name}: expected shape {shape}, got {array.shape}")
+            if kinds[name] == "f" and not onp.all(onp.isfinite(array)):
+                row = int(onp.argwhere(~onp.isfinite(array))[0][0])
+                raise ValueError(f"PoseGraph.{name}: a non-finite value in row {row}")
         if e and (self.edges.min() < 0 or self.edges.max() >= n):
             raise ValueError(
                 f"PoseGraph.edges: indices must lie in [0, {n}), "
                 f"got {self.edges.min()}..{self.edges.max()}"
             )
+        info = self.information
+        asymmetry = onp.abs(info - onp.swapaxes(info, -1, -2)).max(axis=(-2, -1), initial=0.0)
+        bad = onp.flatnonzero(asymmetry > 1e-12 * onp.abs(info).max(axis=(-2, -1), initial=0.0))
+        if len(bad):
+            raise ValueError(f"PoseGraph.information: edge {bad[0]} is not symmetric")
 
     @property
     def group(self) -> type[SE2] | type[SE3]:
@@ -89,7 +99,8 @@ class PoseGraph:
         return len(self.edges)
 
     def pose_group(self) -> Pose:
-        """The poses as a group element of batch ``(N,)`` (JAX arrays, default float dtype)."""
+        """The poses as a group element of batch ``(N,)``, with NumPy float64 parameters
+        (quaternions as stored: ``normalize()`` them for a file's few-digit ones)."""
         return to_group(self.dim, self.poses)
 
     def measurement_group(self) -> Pose:

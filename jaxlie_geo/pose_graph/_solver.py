@@ -8,8 +8,10 @@ Levenberg–Marquardt (Levenberg, *A method for the solution of certain non-line
 in least squares*, 1944) solves (H + λD) δ = −g with D = I, or D = diag(H) (Marquardt,
 *An algorithm for least-squares estimation of nonlinear parameters*, 1963), accepts a step
 only if it lowers the cost, then divides λ by 10; after a step that does not, it multiplies
-λ by ν and doubles ν (ν = 10 after every success). With D = I this is GTSAM's
-``LevenbergMarquardtOptimizer`` with its default parameters, apart from the doubling.
+λ by ν and doubles ν (ν = 10 after every success). With D = I this is close to GTSAM's
+``LevenbergMarquardtOptimizer`` with its default parameters; GTSAM also multiplies λ by a
+fixed 10 after a failure, accepts a step only if its gain ratio (actual over predicted
+decrease) exceeds 10⁻³, and gives up at λ = 10⁵ (here 10¹⁶).
 """
 
 from __future__ import annotations
@@ -88,19 +90,20 @@ def _problem(
     meas = onp.asarray(
         to_group(graph.dim, graph.measurements).normalize().parameters(), onp.float64
     )
-    info = graph.information
+    info = 0.5 * (graph.information + onp.swapaxes(graph.information, -1, -2))
     try:
         W = onp.swapaxes(onp.linalg.cholesky(info), -1, -2)
     except onp.linalg.LinAlgError:
-        bad = [e for e in range(len(info)) if onp.any(onp.linalg.eigvalsh(info[e]) <= 0)]
+        bad = int(onp.argmin(onp.linalg.eigvalsh(info)[:, 0]))
         raise ValueError(
-            f"solve: the information of edge {bad[0]} (of {len(info)}) is not positive definite"
+            f"solve: the information of edge {bad} (of {len(info)}) is not positive definite"
         ) from None
     edge_i, edge_j = graph.edges[:, 0].astype(onp.int32), graph.edges[:, 1].astype(onp.int32)
     mesh = None
     if devices is not None and len(devices) > 1:
         pad = -len(edge_i) % len(devices)
-        # Padding edges (0, 1) with zero weight add nothing, and only to blocks that exist.
+        # Padding edges (0, 1) of zero weight add nothing to the cost, g or H (with the
+        # Cholesky path, at most a block of zeros to H's pattern).
         edge_i = onp.concatenate([edge_i, onp.zeros(pad, onp.int32)])
         edge_j = onp.concatenate([edge_j, onp.ones(pad, onp.int32)])
         identity = onp.asarray(G.identity().parameters(), onp.float64)
@@ -121,6 +124,8 @@ def _problem(
         replicated = NamedSharding(mesh, PartitionSpec())
         p = Problem(*(sharded(x) for x in p[:4]), *(jax.device_put(x, replicated) for x in p[4:]))
         poses = jax.device_put(poses, replicated)
+    elif devices is not None and len(devices) == 1:
+        p, poses = jax.device_put((p, poses), devices[0])
     return p, poses, mesh
 
 
@@ -279,7 +284,8 @@ def solve(
         anchor_sigma: σ of the prior that holds the first pose at its initial value.
         max_iterations: the most accepted steps.
         tolerance: stop when a step's relative decrease of the cost, or the decrease the
-            linear model predicts, falls below it (GTSAM's default is 1e-5, Ceres
+            linear model predicts for an iteration's first (least damped) step, falls
+            below it (GTSAM's default is 1e-5, Ceres
             Solver's 1e-6).
         initial_damping: Levenberg–Marquardt's first λ.
         diagonal_damping: damp with λ diag(H) (Marquardt's scaling, each entry at least
@@ -296,8 +302,8 @@ def solve(
         A ``Solution``.
 
     Raises:
-        ValueError: an argument out of range, or an information matrix that is not
-            positive definite.
+        ValueError: an argument out of range, an information matrix that is not
+            positive definite, or a graph that is not connected.
     """
     if method not in ("lm", "gn"):
         raise ValueError(f"solve: method must be 'lm' or 'gn', got {method!r}")
@@ -322,12 +328,30 @@ def solve(
         )
     if onp.any(graph.edges[:, 0] == graph.edges[:, 1]):
         raise ValueError("solve: an edge joins a pose to itself")
+    _check_connected(graph)
     chosen = _default_solver(devices) if linear_solver == "auto" else linear_solver
     with jax.enable_x64(True):
         return _solve(
             graph, method, chosen, robust, anchor_sigma, max_iterations, tolerance,
             initial_damping, diagonal_damping, cg_tolerance, cg_max_iterations, devices, progress,
         )  # fmt: skip
+
+
+def _check_connected(graph: PoseGraph) -> None:
+    """Every pose must be joined to the first through edges: the anchor fixes only the
+    first pose's component, and any other leaves H singular."""
+    sparse = importlib.import_module("scipy.sparse")  # installed with jax, which needs it
+    csgraph = importlib.import_module("scipy.sparse.csgraph")
+    n = graph.num_poses
+    i, j = graph.edges[:, 0], graph.edges[:, 1]
+    adjacency = sparse.coo_matrix((onp.ones(len(i)), (i, j)), shape=(n, n))
+    count, labels = csgraph.connected_components(adjacency, directed=False)
+    if count > 1:
+        loose = int(onp.flatnonzero(labels != labels[0])[0])
+        raise ValueError(
+            f"solve: the graph has {count} connected components; pose {loose} (id "
+            f"{graph.ids[loose]}) is not joined to the first pose by any chain of edges"
+        )
 
 
 def _default_solver(devices: Optional[Sequence[Any]]) -> str:
@@ -360,18 +384,18 @@ def _solve(
     bar.update(0, current, 0.0, lam, times[-1])
     reason, converged = f"reached max_iterations = {max_iterations}", False
     for it in range(1, max_iterations + 1):
-        accepted = False
+        accepted, first_try = False, True
         while True:
             delta, predicted = system.step(lam)
             if not math.isfinite(predicted):  # a singular or overflowing system
                 if method == "gn":
                     reason = "the linear system gave a non-finite step"
                     break
-            elif not predicted > tolerance * current:
-                reason, converged = (
-                    "the linear model predicts a relative decrease below tolerance",
-                    True,
-                )
+            elif first_try and not predicted > tolerance * current:
+                # Only the first, least damped step of an iteration speaks for the model:
+                # raising λ after a failure shrinks every prediction.
+                reason = "the linear model predicts a relative decrease below tolerance"
+                converged = True
                 break
             else:
                 new_poses, new = _try_step(G, robust, poses, delta, p)
@@ -379,13 +403,14 @@ def _solve(
                 if method == "gn" or new < current:
                     accepted = True
                     break
+            first_try = False
             lam, nu = lam * nu, 2.0 * nu
             if lam > MAX_DAMPING:
                 reason = f"no step lowers the cost (λ > {MAX_DAMPING:g})"
                 break
         if not accepted:
             break
-        if method == "gn" and new > current:
+        if method == "gn" and not new <= current:  # also a NaN cost
             reason = "a Gauss–Newton step raised the cost; the previous estimate is kept"
             break
         if method == "lm":
