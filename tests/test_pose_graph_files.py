@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import List, Optional
+from typing import Any, List, Optional, Tuple
 
 import numpy as np
 import pytest
@@ -470,9 +470,11 @@ def test_write_errors(tmp_path: Path) -> None:
 # tests above cover the formats without it).
 
 
-def _gtsam_data() -> Path:
+def _gtsam() -> Tuple[Any, Path]:
+    """gtsam and its data folder; the comparisons skip where gtsam (the ``bench`` extra)
+    is not installed."""
     gtsam = pytest.importorskip("gtsam")
-    return Path(gtsam.__file__).parent / "Data"
+    return gtsam, Path(gtsam.__file__).parent / "Data"
 
 
 def _compare_with_gtsam(
@@ -503,9 +505,7 @@ def _compare_with_gtsam(
 
 
 def test_against_gtsam_g2o_3d() -> None:
-    import gtsam
-
-    data = _gtsam_data()
+    gtsam, data = _gtsam()
     omega_v = [3, 4, 5, 0, 1, 2]  # GTSAM's Pose3 tangent is (ω, v)
     for name, poses, edges in [
         ("pose3example-grid.txt", 27, 44),
@@ -518,9 +518,7 @@ def test_against_gtsam_g2o_3d() -> None:
 
 
 def test_against_gtsam_toro_2d() -> None:
-    import gtsam
-
-    data = _gtsam_data()
+    gtsam, data = _gtsam()
     graph = read(data / "w10000.graph")
     assert (graph.num_poses, graph.num_edges) == (10000, 64311)
     np.testing.assert_array_equal(graph.information, np.broadcast_to(np.eye(3), (64311, 3, 3)))
@@ -534,9 +532,7 @@ def test_against_gtsam_toro_3d() -> None:
     """sphere2500: edges only. GTSAM's load3D reads the same 21 numbers but applies them
     to its (ω, v) tangent unpermuted (rotation first); this reader puts the first block on
     the translation, as HOG-Man does."""
-    import gtsam
-
-    data = _gtsam_data()
+    gtsam, data = _gtsam()
     graph = read(data / "sphere2500.txt")
     assert (graph.num_poses, graph.num_edges) == (2500, 4949)
     np.testing.assert_array_equal(
@@ -547,7 +543,7 @@ def test_against_gtsam_toro_3d() -> None:
 
 
 def test_gtsam_files_without_vertices() -> None:
-    data = _gtsam_data()
+    _, data = _gtsam()
     graph = read(data / "w20000.txt", information_order="g2o")
     assert graph.num_edges == 26831
     np.testing.assert_array_equal(
