@@ -670,7 +670,7 @@ names = ("ids", "poses", "edges", "measurements", "information")
 graph = PoseGraph(3, *(data[name] for name in names))
 devices = jax.devices()
 with jax.enable_x64(True):
-    p, _, _ = _problem(graph, 1e-6, devices)
+    p, _ = _problem(graph, 1e-6, devices)
 out = {
     "devices": len(devices),
     "platform": devices[0].platform,

@@ -32,10 +32,9 @@ import jax.numpy as jnp
 from .. import manifold
 from .._se2 import SE2
 from .._se3 import SE3
+from .._xla import matmul
 
 Group = Union[SE2, SE3]
-
-_HIGHEST = jax.lax.Precision.HIGHEST
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,8 +105,14 @@ class Linearisation(NamedTuple):
     A_0: jax.Array  # (k, k)
 
 
-def _mv(A: jax.Array, x: jax.Array) -> jax.Array:
-    return jnp.einsum("...ab,...b->...a", A, x, precision=_HIGHEST)
+def tr(A: jax.Array) -> jax.Array:
+    """Aᵀ over the last two axes."""
+    return jnp.swapaxes(A, -1, -2)
+
+
+def mv(A: jax.Array, x: jax.Array) -> jax.Array:
+    """A x for stacks ``(..., m, n)`` and ``(..., n)``, at full precision."""
+    return matmul(A, x[..., None])[..., 0]
 
 
 def _edges(G: Type[Group], poses: jax.Array, p: Problem) -> tuple[Any, Any, Any]:
@@ -127,7 +132,7 @@ def cost(G: Type[Group], poses: jax.Array, p: Problem, robust: Optional[RobustKe
     """½ Σ ρ(‖W r_ij‖²) + ½ ‖r_0/σ‖², a scalar."""
     T_i, T_j, Z = _edges(G, poses, p)
     r = Z._between(T_i._between(T_j)).log()
-    edge_costs, _ = _costs(_mv(p.sqrt_information, r), robust)
+    edge_costs, _ = _costs(mv(p.sqrt_information, r), robust)
     anchor: Any = G(p.anchor)
     r_0 = anchor._between(G(poses[0])).log() * p.anchor_weight
     return jnp.sum(edge_costs) + 0.5 * jnp.sum(r_0 * r_0)
@@ -141,13 +146,13 @@ def linearise(
     E = Z._between(T_i._between(T_j))
     r = E.log()
     J_j = E.jlog()  # J_r⁻¹(r)
-    J_i = -jnp.matmul(J_j, T_j._between(T_i).adjoint(), precision=_HIGHEST)
+    J_i = -matmul(J_j, T_j._between(T_i).adjoint())
     W = p.sqrt_information
-    e = _mv(W, r)
+    e = mv(W, r)
     edge_costs, weight = _costs(e, robust)
     scale = jnp.sqrt(weight)[:, None]
-    A_i = jnp.matmul(W, J_i, precision=_HIGHEST) * scale[..., None]
-    A_j = jnp.matmul(W, J_j, precision=_HIGHEST) * scale[..., None]
+    A_i = matmul(W, J_i) * scale[..., None]
+    A_j = matmul(W, J_j) * scale[..., None]
     anchor: Any = G(p.anchor)
     E_0 = anchor._between(G(poses[0]))
     e_0 = E_0.log() * p.anchor_weight

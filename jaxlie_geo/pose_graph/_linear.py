@@ -25,9 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as onp
 
-from ._factors import Linearisation, Problem
-
-_HIGHEST = jax.lax.Precision.HIGHEST
+from .._xla import matmul
+from ._factors import Linearisation, Problem, mv, tr
 
 #: Damping D = diag(H), clipped below to this so that a direction the data do not
 #: constrain is still damped (as in Ceres Solver's Levenberg–Marquardt strategy).
@@ -39,14 +38,13 @@ def gradient_and_diagonal(
 ) -> tuple[jax.Array, jax.Array]:
     """g = Σ Aᵀe, ``(N, k)``, and H's diagonal blocks Σ AᵀA, ``(N, k, k)``."""
     seg = jax.ops.segment_sum
-    tr = lambda A: jnp.swapaxes(A, -1, -2)  # noqa: E731
-    mv = lambda A, x: jnp.einsum("...ab,...b->...a", A, x, precision=_HIGHEST)  # noqa: E731
-    mm = lambda A, B: jnp.matmul(A, B, precision=_HIGHEST)  # noqa: E731
     n = num_poses
     g = seg(mv(tr(lin.A_i), lin.e), p.edge_i, n) + seg(mv(tr(lin.A_j), lin.e), p.edge_j, n)
     g = g.at[0].add(mv(lin.A_0.T, lin.e_0))
-    D = seg(mm(tr(lin.A_i), lin.A_i), p.edge_i, n) + seg(mm(tr(lin.A_j), lin.A_j), p.edge_j, n)
-    D = D.at[0].add(mm(lin.A_0.T, lin.A_0))
+    D = seg(matmul(tr(lin.A_i), lin.A_i), p.edge_i, n) + seg(
+        matmul(tr(lin.A_j), lin.A_j), p.edge_j, n
+    )
+    D = D.at[0].add(matmul(lin.A_0.T, lin.A_0))
     return g, D
 
 
@@ -56,12 +54,10 @@ def hessian_values(lin: Linearisation) -> jax.Array:
     triangle. Flat, ``(E·(k² + k(k+1)) + k(k+1)/2,)``."""
     k = lin.e.shape[-1]
     iu = onp.triu_indices(k)
-    tr = lambda A: jnp.swapaxes(A, -1, -2)  # noqa: E731
-    mm = lambda A, B: jnp.matmul(A, B, precision=_HIGHEST)  # noqa: E731
-    H_ii = mm(tr(lin.A_i), lin.A_i)[:, iu[0], iu[1]]
-    H_jj = mm(tr(lin.A_j), lin.A_j)[:, iu[0], iu[1]]
-    H_ij = mm(tr(lin.A_i), lin.A_j).reshape(-1, k * k)
-    H_00 = mm(lin.A_0.T, lin.A_0)[iu[0], iu[1]]
+    H_ii = matmul(tr(lin.A_i), lin.A_i)[:, iu[0], iu[1]]
+    H_jj = matmul(tr(lin.A_j), lin.A_j)[:, iu[0], iu[1]]
+    H_ij = matmul(tr(lin.A_i), lin.A_j).reshape(-1, k * k)
+    H_00 = matmul(lin.A_0.T, lin.A_0)[iu[0], iu[1]]
     return jnp.concatenate([jnp.concatenate([H_ii, H_jj, H_ij], axis=1).ravel(), H_00])
 
 
@@ -146,8 +142,6 @@ def pcg(
     """δ ``(N, k)`` solving (H + diag(damping)) δ = −g by conjugate gradients with the
     block-Jacobi preconditioner (D + diag(damping))⁻¹, D the diagonal blocks of H."""
     n, k = g.shape
-    tr = lambda A: jnp.swapaxes(A, -1, -2)  # noqa: E731
-    mv = lambda A, x: jnp.einsum("...ab,...b->...a", A, x, precision=_HIGHEST)  # noqa: E731
 
     def matvec(x: jax.Array) -> jax.Array:
         u = mv(lin.A_i, x[p.edge_i]) + mv(lin.A_j, x[p.edge_j])

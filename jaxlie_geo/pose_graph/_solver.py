@@ -82,7 +82,7 @@ class Solution:
 
 def _problem(
     graph: PoseGraph, anchor_sigma: float, devices: Optional[Sequence[Any]]
-) -> tuple[Problem, jax.Array, Optional[Mesh]]:
+) -> tuple[Problem, jax.Array]:
     """Device arrays of the graph, float64; edges padded to a multiple of the devices and
     sharded over them."""
     G = graph.group
@@ -126,7 +126,7 @@ def _problem(
         poses = jax.device_put(poses, replicated)
     elif devices is not None and len(devices) == 1:
         p, poses = jax.device_put((p, poses), devices[0])
-    return p, poses, mesh
+    return p, poses
 
 
 # -- compiled pieces (static: the group, the kernel, the number of poses) ----------------
@@ -371,7 +371,7 @@ def _solve(
 ) -> Solution:  # fmt: skip
     start = time.perf_counter()
     G = graph.group
-    p, poses, _ = _problem(graph, anchor_sigma, devices)
+    p, poses = _problem(graph, anchor_sigma, devices)
     system: Any
     if linear_solver == "cholesky":
         system = _CholeskyPath(G, robust, graph, p, diagonal_damping)
@@ -445,7 +445,7 @@ def graph_cost(
     """The cost ``solve`` minimises, at ``graph.poses`` (the anchor at the first pose
     itself, so it adds 0): ½ Σ ρ(‖W_ij r_ij‖²), float64."""
     with jax.enable_x64(True):
-        p, poses, _ = _problem(graph, anchor_sigma, None)
+        p, poses = _problem(graph, anchor_sigma, None)
         return float(_cost_jit(graph.group, robust, poses, p))
 
 
