@@ -28,7 +28,6 @@
 
 from __future__ import annotations
 
-import gc
 import os
 from pathlib import Path
 from typing import Any, Callable, Dict, Sequence, Tuple
@@ -67,6 +66,8 @@ from hypothesis import strategies as st  # noqa: E402
 
 import jaxlie_geo  # noqa: E402
 from jaxlie_geo import SE2, SE3, SE23, SO2, SO3, Sim3  # noqa: E402
+
+pytest_plugins = ["_compile_budget"]
 
 # ---------------------------------------------------------------------------------
 # Hypothesis profiles.
@@ -110,44 +111,6 @@ def pytest_configure(config: pytest.Config) -> None:
                     break
                 size -= path.stat().st_size
                 path.unlink()
-
-
-def _memory_map_count() -> int:
-    """The number of memory mappings of this process (0 where /proc is absent)."""
-    try:
-        with open("/proc/self/maps", "rb") as f:
-            return f.read().count(b"\n")
-    except OSError:
-        return 0
-
-
-def _memory_map_limit() -> int:
-    try:
-        with open("/proc/sys/vm/max_map_count") as f:
-            return int(f.read())
-    except (OSError, ValueError):
-        return 65530  # Linux's default
-
-
-_MAP_BUDGET = _memory_map_limit() // 2
-
-
-@pytest.fixture(autouse=True)
-def _bounded_compiled_code() -> Any:
-    """Free the compiled programs when this process holds many memory mappings.
-
-    XLA's CPU backend maps the code and data of every compiled program into memory (one
-    executable, one read-only and one writable mapping per code object), and ``jax.jit``
-    keeps every program alive. One pytest-xdist worker of this suite compiles thousands of
-    programs and held 54,000 mappings (18,000 of each kind), near Linux's default
-    ``vm.max_map_count`` of 65,530; past it ``mmap`` fails inside the compiler and the
-    worker dies (SIGABRT or SIGSEGV in ``backend_compile_and_load``), in whichever test
-    compiles next. Past half the limit the caches are cleared (programs compiled again
-    come from the persistent cache)."""
-    yield
-    if _memory_map_count() > _MAP_BUDGET:
-        jax.clear_caches()
-        gc.collect()
 
 
 # ---------------------------------------------------------------------------------

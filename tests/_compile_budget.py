@@ -1,0 +1,208 @@
+"""The suite's compile budget: a pytest plugin that counts the XLA programs the tests compile.
+
+Compiling is almost all of this suite's time, so the number of programs is what keeps it
+fast. Every program that JAX hands to the XLA backend (compiled anew or read from the
+persistent cache) is one ``/jax/core/compile/backend_compile_duration`` event; the plugin
+attributes each event to the test that was running, sums them per worker and reports, at the
+end of the run:
+
+* the total number of programs and their compile time, the peak resident memory and the peak
+  number of memory mappings of a worker;
+* the ten test modules with the most compile time;
+
+and writes every test's programs and compile seconds to ``out/compile-report.json`` (the
+place to look before making a test cheaper).
+
+The run fails when the total exceeds ``PROGRAM_BUDGET`` (``JAXLIE_GEO_TEST_PROGRAM_BUDGET``
+sets another limit, enforced on any run). The budget counts the programs of the pytest
+processes; the subprocesses (examples, notebooks, the multi-device run) compile their own
+and are bounded by their wall time instead. Without the variable it applies to whole runs
+only: a run of selected tests (``-k``, a file, ``--lf``) reports but never fails on it.
+"""
+
+from __future__ import annotations
+
+import gc
+import json
+import os
+import resource
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Dict, List, Tuple
+
+import jax
+import pytest
+
+PROGRAM_BUDGET = 12000
+"""Programs the whole suite may compile, a little above what it needs."""
+
+_EVENT = "/jax/core/compile/backend_compile_duration"
+
+
+def memory_map_count() -> int:
+    """The number of memory mappings of this process (0 where /proc is absent)."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return f.read().count(b"\n")
+    except OSError:
+        return 0
+
+
+def _memory_map_limit() -> int:
+    try:
+        with open("/proc/sys/vm/max_map_count") as f:
+            return int(f.read())
+    except (OSError, ValueError):
+        return 65530  # Linux's default
+
+
+MAP_BUDGET = _memory_map_limit() // 2
+"""Past this many memory mappings a process frees its compiled programs (``_bounded``)."""
+
+
+def _peak_rss_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+class _Counter:
+    """Compile events per test module of one process."""
+
+    def __init__(self) -> None:
+        self.test = "(collection)"
+        self.programs: Dict[str, int] = defaultdict(int)
+        self.seconds: Dict[str, float] = defaultdict(float)
+        self.peak_maps = 0
+        self.clears = 0
+        self.start = time.perf_counter()
+
+    def listener(self, event: str, duration: float, **_: Any) -> None:
+        if event == _EVENT:
+            self.programs[self.test] += 1
+            self.seconds[self.test] += duration
+
+    def summary(self) -> Dict[str, Any]:
+        return {
+            "programs": dict(self.programs),
+            "seconds": dict(self.seconds),
+            "peak_maps": max(self.peak_maps, memory_map_count()),
+            "cache_clears": self.clears,
+            "peak_rss_mib": _peak_rss_mib(),
+            "wall": time.perf_counter() - self.start,
+        }
+
+
+_COUNTER = _Counter()
+jax.monitoring.register_event_duration_secs_listener(_COUNTER.listener)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: Any) -> Any:
+    """Attribute compile events to the test; then bound the compiled code's mappings.
+
+    XLA's CPU backend maps the code and data of every compiled program into memory (one
+    executable, one read-only and one writable mapping per code object), and ``jax.jit``
+    keeps every program alive. A process that compiles thousands of programs nears Linux's
+    default ``vm.max_map_count`` of 65,530; past it ``mmap`` fails inside the compiler and
+    the process dies (SIGABRT or SIGSEGV in ``backend_compile_and_load``) in whichever test
+    compiles next. Past ``MAP_BUDGET`` the caches are cleared (programs compiled again come
+    from the persistent cache); the report gives the peak count and how often it cleared."""
+    _COUNTER.test = item.nodeid
+    yield
+    maps = memory_map_count()
+    _COUNTER.peak_maps = max(_COUNTER.peak_maps, maps)
+    if maps > MAP_BUDGET:
+        _COUNTER.clears += 1
+        jax.clear_caches()
+        gc.collect()
+
+
+_WORKERS: List[Dict[str, Any]] = []
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    config = session.config
+    if hasattr(config, "workerinput"):  # a pytest-xdist worker: hand the counts over
+        config.workeroutput["compile_budget"] = _COUNTER.summary()
+        return
+    workers = _WORKERS or [_COUNTER.summary()]
+    total = sum(sum(w["programs"].values()) for w in workers)
+    config._compile_budget_total = total  # type: ignore[attr-defined]
+    if _whole_run(config) and total > _budget():
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def pytest_testnodedown(node: Any, error: Any) -> None:
+    summary = getattr(node, "workeroutput", {}).get("compile_budget")
+    if summary is not None:
+        _WORKERS.append(summary)
+
+
+def _budget() -> int:
+    return int(os.environ.get("JAXLIE_GEO_TEST_PROGRAM_BUDGET", PROGRAM_BUDGET))
+
+
+def _whole_run(config: pytest.Config) -> bool:
+    """Whether the budget applies: every test of the default selection ran (no -k, -m,
+    --lf, paths), or the limit was set explicitly."""
+    if "JAXLIE_GEO_TEST_PROGRAM_BUDGET" in os.environ:
+        return True
+    opt = config.option
+    if getattr(opt, "keyword", "") or getattr(opt, "markexpr", ""):
+        return False
+    if getattr(opt, "lf", False) or getattr(opt, "failedfirst", False):
+        return False
+    return not config.args or [os.path.normpath(a) for a in config.args] == ["tests"]
+
+
+def _write_report(
+    config: pytest.Config, per_test: Dict[str, Tuple[int, float]], workers: List[Dict[str, Any]]
+) -> None:
+    out = Path(str(config.rootpath)) / "out"
+    out.mkdir(exist_ok=True)
+    report = {
+        "tests": {
+            t: {"programs": n, "seconds": round(s, 3)}
+            for t, (n, s) in sorted(per_test.items(), key=lambda kv: -kv[1][1])
+        },
+        "workers": [
+            {k: v for k, v in w.items() if k not in ("programs", "seconds")} for w in workers
+        ],
+    }
+    (out / "compile-report.json").write_text(json.dumps(report, indent=1))
+
+
+def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
+    if hasattr(config, "workerinput"):
+        return
+    workers = _WORKERS or [_COUNTER.summary()]
+    per_test: Dict[str, Tuple[int, float]] = {}
+    per_module: Dict[str, Tuple[int, float]] = {}
+    for w in workers:
+        for test, n in w["programs"].items():
+            secs = w["seconds"][test]
+            for table, key in ((per_test, test), (per_module, test.split("::")[0])):
+                count, total_secs = table.get(key, (0, 0.0))
+                table[key] = (count + n, total_secs + secs)
+    _write_report(config, per_test, workers)
+    total = sum(n for n, _ in per_module.values())
+    seconds = sum(s for _, s in per_module.values())
+    tr = terminalreporter
+    tr.section("compile budget")
+    for module, (n, secs) in sorted(per_module.items(), key=lambda kv: -kv[1][1])[:10]:
+        tr.write_line(f"{secs:8.1f} s {n:6d} programs  {module}")
+    budget = _budget()
+    tr.write_line(
+        f"total: {total} programs, {seconds:.1f} s compiling, budget {budget} programs; "
+        f"per worker: peak RSS {max(w['peak_rss_mib'] for w in workers):.0f} MiB, "
+        f"peak memory mappings {max(w['peak_maps'] for w in workers)} "
+        f"(caches cleared {sum(w['cache_clears'] for w in workers)} times past {MAP_BUDGET})"
+    )
+    if total > budget:
+        verdict = "fails the run" if _whole_run(config) else "not enforced on a partial run"
+        tr.write_line(
+            f"the suite compiled {total} programs, more than its budget of {budget}: {verdict}. "
+            "Put new checks into the existing per-group programs (tests/README.md) or, if the "
+            "growth is deliberate, raise PROGRAM_BUDGET in tests/_compile_budget.py.",
+            red=True,
+        )
