@@ -13,9 +13,9 @@
   while writing one) is compiled again, with the warning silenced.
 * Hypothesis profiles: ``dev`` (default, more examples) and ``ci`` (fewer, derandomised,
   no deadline); ``HYPOTHESIS_PROFILE`` picks one (``.ci/run`` sets ``ci``).
-* The harness: ``GROUPS`` lists every group once; ``over_cases`` parametrises a test over
-  group × batch shape × dtype, ``over_groups_dtypes`` over group × dtype and
-  ``over_groups`` over the groups alone. A group added to ``GROUPS`` (with its generators in
+* The harness: ``GROUPS`` lists every group once; ``over_groups_dtypes`` parametrises a
+  test over group × dtype and ``over_groups`` over the groups alone (the numeric tier's
+  shared batch is in ``_programs.py``). A group added to ``GROUPS`` (with its generators in
   ``GENERATORS`` and its tangent layout in ``LAYOUT``) gets every property test. Subsets
   (``SE_GROUPS``, ``QUATERNION_GROUPS``, ``NON_ABELIAN_GROUPS``) are derived from ``GROUPS``
   by a property of each group, never listed by hand.
@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Callable, Dict, Sequence, Tuple
+from typing import Any, Callable, Dict, Tuple
 
 _JAX_CACHE = os.environ.setdefault(
     "JAXLIE_GEO_TEST_JAX_CACHE", str(Path(__file__).resolve().parents[1] / "out" / "jax-cache")
@@ -117,9 +117,6 @@ def pytest_configure(config: pytest.Config) -> None:
 # The harness: every group, batch shape and dtype.
 
 GROUPS = [SO2, SE2, SO3, SE3, Sim3, SE23]
-BATCHES: Sequence[Tuple[int, ...]] = [(), (2, 4)]
-"""No batch axes, and two of them (one leading axis is the second's special case: the
-batch code never treats the axes one by one)."""
 DTYPES = [jnp.float32, jnp.float64]
 
 
@@ -136,22 +133,10 @@ def group_name(G: type) -> str:
     return G.__name__
 
 
-def _batch_name(batch: Tuple[int, ...]) -> str:
-    return "b" + ("x".join(map(str, batch)) if batch else "0")
-
-
-CASES = [
-    pytest.param(G, b, d, id=f"{G.__name__}-{_batch_name(b)}-{dtype_name(d)}")
-    for G in GROUPS
-    for b in BATCHES
-    for d in DTYPES
-]
 GROUP_DTYPES = [
     pytest.param(G, d, id=f"{G.__name__}-{dtype_name(d)}") for G in GROUPS for d in DTYPES
 ]
 
-over_cases = pytest.mark.parametrize(("G", "batch", "dtype"), CASES)
-"""Parametrise over group × batch shape × dtype (arguments ``G, batch, dtype``)."""
 over_groups_dtypes = pytest.mark.parametrize(("G", "dtype"), GROUP_DTYPES)
 """Parametrise over group × dtype (arguments ``G, dtype``)."""
 over_groups = pytest.mark.parametrize("G", GROUPS, ids=group_name)
@@ -514,16 +499,13 @@ __all__ = [
     "SE_GROUPS",
     "QUATERNION_GROUPS",
     "NON_ABELIAN_GROUPS",
-    "BATCHES",
     "DTYPES",
     "HALF_DTYPES",
     "dtype_name",
     "group_name",
-    "CASES",
     "TOL",
     "COMPAT_TOL",
     "EPS",
-    "over_cases",
     "over_groups_dtypes",
     "over_groups",
     "over_dtypes",

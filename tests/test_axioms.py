@@ -1,5 +1,6 @@
-"""The group axioms and the definitions of each operation, on every group × dtype, as one
-compiled program per group and dtype (``tests/_programs.py``).
+"""The group axioms and the definitions of each operation, on every group × dtype, from one
+evaluation of the operations per group and dtype on the shared regime batch
+(``tests/_programs.py``).
 
 References are independent of the library: the group laws themselves, the matrix
 representation (numpy products, inverses and determinants), the generators written out in
@@ -199,6 +200,18 @@ def _program(G, d):
         "jlog_x": Tx.jlog(),
         "jlog_x_ad": _jlog_by_autodiff(Tx),
     }
+    # Validity of what the operations make (a rotation part scaled by 1e3, normalized).
+    big = G(T.parameters().at[..., :k].multiply(jnp.asarray(1e3, dtype))).normalize()
+    made = {
+        "T": T,
+        "exp_y": G.exp(y),
+        "product": T @ G.exp(y),
+        "inverse": Tinv,
+        "exp_log_T": G.exp(T.log()),
+        "identity": I_b,
+        "normalized": big,
+    }
+    out["valid"] = {name: E.is_valid() for name, E in made.items()}
     # One unbatched element through the same operations: equal to the batched result.
     T0, U0, x0, y0, p0 = T[0, 0], U[0, 0], x[0, 0], y[0, 0], p[0, 0]
     out["one"] = {
@@ -416,6 +429,16 @@ def jlog_matches_autodiff(G, dtype, d, o):
     ok = rotation_angle(G, o["log_exp_x"]) < 3.1
     assert np.all(np.isfinite(o["jlog_x"][ok]))
     assert_close(o["jlog_x"][ok], o["jlog_x_ad"][ok], dtype, 16)
+
+
+@checks.add
+def elements_the_operations_make_are_valid(G, dtype, d, o):
+    """Drawn elements, exponentials of tangents (angles up to 3), their products, inverses
+    and logs' exponentials, the identity, and a rescaled element after ``normalize``, are
+    valid at the default tolerance; the result is boolean, of the batch shape."""
+    for name, valid in o["valid"].items():
+        assert valid.dtype == np.bool_ and valid.shape == BATCH, name
+        assert np.all(valid), name
 
 
 @checks.add

@@ -22,6 +22,7 @@ import jaxlie as jaxlie_ref
 import mpmath as mp
 import numpy as np
 import pytest
+from _programs import BATCH
 from conftest import (
     DTYPES,
     GROUPS,
@@ -29,7 +30,6 @@ from conftest import (
     dtype_name,
     group_name,
     is_se,
-    over_cases,
     over_dtypes,
     over_groups,
     over_groups_dtypes,
@@ -419,7 +419,8 @@ def test_derivative_matches_the_svd_projection(G):
         np.testing.assert_allclose(fd, want, rtol=0, atol=1e-8)
 
 
-@over_cases
+@over_groups_dtypes
+@pytest.mark.parametrize("batch", [(), BATCH], ids=["b0", "b4x8"])
 def test_batched_jitted_and_vmapped(G, batch, dtype):
     """Any leading batch axes; dtype in = dtype out; the same numbers eagerly, under ``jit``
     and under ``vmap`` over the first axis."""

@@ -1,7 +1,8 @@
 """Validity of elements: ``is_valid`` per element, ``check_valid`` through checkify.
 
 References: the norm of the rotation part and the finiteness of the parameters, computed
-in float64 NumPy, and elements the group operations make (valid by construction).
+in float64 NumPy. That the elements the group operations make are valid is a property of
+the regime batch (``test_axioms``).
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import (
-    over_cases,
     over_groups,
     over_groups_dtypes,
     random_element,
@@ -34,22 +34,6 @@ def _scale_rotation(T, factors):
     p = np.array(T.parameters())
     p[..., :k] *= np.asarray(factors, p.dtype)[..., None]
     return type(T)(jnp.asarray(p))
-
-
-@over_cases
-def test_elements_the_operations_make_are_valid(G, batch, dtype):
-    """Drawn elements, exponentials of tangents (angles up to 3), their products,
-    inverses and logs' exponentials, the identity, and a rescaled element after
-    ``normalize``, are valid at the default tolerance; the result is boolean, of the batch
-    shape."""
-    T = random_element(G, 0, batch, dtype)
-    U = G.exp(random_tangent(G, 1, batch, dtype))
-    elements = [T, U, T @ U, T.inverse(), G.exp(T.log()), G.identity(batch, dtype)]
-    elements.append(_scale_rotation(T, np.full(batch, 1e3)).normalize())
-    for E in elements:
-        valid = E.is_valid()
-        assert valid.dtype == jnp.bool_ and valid.shape == batch
-        assert np.all(np.asarray(valid))
 
 
 @over_groups_dtypes
