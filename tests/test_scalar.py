@@ -115,17 +115,18 @@ def sample_x(name, dtype, n=160):
     return np.where(np.abs(xs) < tiny, 0.0, xs).astype(dtype)
 
 
+@functools.partial(jax.jit, static_argnums=0)
+def _kernel_and_derivatives(name, xs):
+    """The kernel ``name`` and its first two derivatives at ``xs``, in one program (as the
+    library runs it: inside a jitted function)."""
+    f = getattr(_scalar, name)
+    return f(xs), jax.vmap(jax.grad(f))(xs), jax.vmap(jax.grad(jax.grad(f)))(xs)
+
+
 def kernel_errors(name, dtype):
     """Worst (value, d/dx, d²/dx²) errors in ulp over the kernel's sample."""
-    f = getattr(_scalar, name)
     xs = sample_x(name, dtype)
-    d1 = jax.vmap(jax.grad(f))
-    d2 = jax.vmap(jax.grad(jax.grad(f)))
-    got = [
-        np.asarray(f(jnp.asarray(xs))),
-        np.asarray(d1(jnp.asarray(xs))),
-        np.asarray(d2(jnp.asarray(xs))),
-    ]
+    got = [np.asarray(g) for g in _kernel_and_derivatives(name, jnp.asarray(xs))]
     ref_f = _ref(name)
     eps = float(np.finfo(dtype).eps)
     worst = [0.0, 0.0, 0.0]
@@ -143,6 +144,13 @@ def kernel_errors(name, dtype):
     return worst
 
 
+@jax.jit
+def _atan2_over_and_gradient(n2, w):
+    """atan2_over and its two partial derivatives, in one program."""
+    f = _scalar.atan2_over
+    return f(n2, w), jax.vmap(jax.grad(f, 0))(n2, w), jax.vmap(jax.grad(f, 1))(n2, w)
+
+
 def atan2_over_errors(dtype):
     """atan2(n, w)/n on the unit circle, w ≥ 0 (the SO(3) log's case), value and both
     partial derivatives."""
@@ -151,10 +159,7 @@ def atan2_over_errors(dtype):
     w = np.cos(alphas).astype(dtype)
     w[-1] = 0.0
     n2 = (n * n).astype(dtype)
-    f = _scalar.atan2_over
-    got = np.asarray(f(jnp.asarray(n2), jnp.asarray(w)))
-    gn = np.asarray(jax.vmap(jax.grad(f, 0))(jnp.asarray(n2), jnp.asarray(w)))
-    gw = np.asarray(jax.vmap(jax.grad(f, 1))(jnp.asarray(n2), jnp.asarray(w)))
+    got, gn, gw = (np.asarray(g) for g in _atan2_over_and_gradient(n2, w))
     eps = float(np.finfo(dtype).eps)
 
     def ref(a, b):
@@ -292,6 +297,22 @@ SIM3_THETAS = [0.0, 1e-5, 1e-3, 0.1, 0.7, 2.0, math.pi - 1e-3, math.pi]
 _SIM3_ORDERS = [(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)]
 
 
+@jax.jit
+def _sim3_derivatives(sig, xs):
+    """(D0, B, C) and their partial derivatives up to order 2 in (σ, x), keyed by (n, m) =
+    (order in σ, order in x), in one program."""
+    f = lambda s, x: jnp.stack(_scalar.sim3_coefficients(s, x)[1:])
+    H = jax.vmap(jax.hessian(f, (0, 1)))(sig, xs)
+    return {
+        (0, 0): jax.vmap(f)(sig, xs),
+        (1, 0): jax.vmap(jax.jacfwd(f, 0))(sig, xs),
+        (0, 1): jax.vmap(jax.jacfwd(f, 1))(sig, xs),
+        (2, 0): H[0][0],
+        (1, 1): H[0][1],
+        (0, 2): H[1][1],
+    }
+
+
 def sim3_errors(dtype, sigmas=SIM3_SIGMAS, thetas=SIM3_THETAS):
     """Worst errors in ulp of (D0, B, C) (rows) for the value, the first and the second
     derivatives (columns, the worst over the partial derivatives of that order).
@@ -301,14 +322,7 @@ def sim3_errors(dtype, sigmas=SIM3_SIGMAS, thetas=SIM3_THETAS):
     x |∂ref/∂x|, the change one ulp of x = θ² causes."""
     sig, xs = np.meshgrid(np.asarray(sigmas, dtype), np.asarray(thetas, dtype) ** 2)
     sig, xs = sig.ravel(), xs.ravel()
-    f = lambda s, x: jnp.stack(_scalar.sim3_coefficients(s, x)[1:])
-    got = {
-        (0, 0): jax.vmap(f)(sig, xs),
-        (1, 0): jax.vmap(jax.jacfwd(f, 0))(sig, xs),
-        (0, 1): jax.vmap(jax.jacfwd(f, 1))(sig, xs),
-    }
-    H = jax.vmap(jax.hessian(f, (0, 1)))(sig, xs)
-    got.update({(2, 0): H[0][0], (1, 1): H[0][1], (0, 2): H[1][1]})
+    got = _sim3_derivatives(sig, xs)
     eps = float(np.finfo(dtype).eps)
     worst = np.zeros((3, 3))
     for i, (s, x) in enumerate(zip(sig.astype(float), xs.astype(float))):
