@@ -36,6 +36,7 @@ import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _mpref as M  # noqa: E402
+from _diskcache import disk_cached  # noqa: E402
 from conftest import SE_GROUPS  # noqa: E402
 
 import jaxlie_geo  # noqa: E402
@@ -43,7 +44,7 @@ import jaxlie_geo  # noqa: E402
 N_PER = 64
 
 
-@functools.lru_cache(maxsize=None)
+@disk_cached
 def _cases(group: str, dtype: str) -> M.Cases:
     return M.make_cases(group, dtype, n_per=N_PER, seed=0)
 

@@ -43,6 +43,7 @@ import mpmath as mp
 import numpy as np
 import pytest
 import scipy.linalg
+from _diskcache import disk_cached
 from conftest import (
     EPS,
     GENERATORS,
@@ -196,7 +197,7 @@ def _hi_lo(M: mp.matrix) -> Tuple[np.ndarray, np.ndarray]:
     return hi, lo
 
 
-@functools.lru_cache(maxsize=None)
+@disk_cached
 def _references(G: type, dtype_name: str) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
     """name -> (hi, lo), each (n_cases, k, k); NaN where a function is not checked."""
     X, meta = _cases(G, dtype_name)
