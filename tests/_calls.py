@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, Tuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _programs import BATCH
 from conftest import is_se, key_of, random_element, random_tangent
 
 import jaxlie_geo
@@ -23,18 +24,20 @@ Call = Callable[[Dict[str, Any]], Any]
 
 
 def context(
-    G: type, dtype: Any, batch_T: Tuple[int, ...] = (3,), batch_U: Tuple[int, ...] = (3,)
+    G: type, dtype: Any, batch_T: Tuple[int, ...] = BATCH, batch_U: Tuple[int, ...] = BATCH
 ) -> Dict[str, Any]:
     """Inputs for every call: ``T`` and ``x`` of batch ``batch_T``, ``U`` and points of batch
-    ``batch_U``, three times and three angles (the batch (3,) of the harness, so that
-    compiled functions are shared with the property tests)."""
+    ``batch_U``, times along ``batch_U``'s last axis and three angles. The default batch is
+    the numeric tier's (``_programs.BATCH``), so that the compiled operations are shared with
+    the property tests."""
+    n = batch_U[-1] if batch_U else 1
     return {
         "dtype": dtype,
         "T": random_element(G, 7, batch_T, dtype),
         "U": random_element(G, 8, batch_U, dtype),
         "x": random_tangent(G, 7, batch_T, dtype),
         "p": np.ones((*batch_U, G.space_dim), dtype),
-        "t": np.asarray([0.25, 0.75, 1.5], dtype),
+        "t": np.resize(np.asarray([0.25, 0.75, 1.5]), (n,)).astype(dtype),
         "theta": np.asarray([0.1, -0.4, 2.0], dtype),
     }
 
@@ -43,9 +46,11 @@ def public_calls(G: type) -> Dict[str, Call]:
     """name -> function of a context dict, returning whatever the public method or factory
     returns (the group-specific factories and readers of SO2, SO3 and SE2 included)."""
     calls = {
-        "identity": lambda c: G.identity((3,), dtype=c["dtype"]),
+        "identity": lambda c: G.identity(c["T"].get_batch_axes(), dtype=c["dtype"]),
         "identity_unbatched": lambda c: G.identity(dtype=c["dtype"]),
-        "sample_uniform": lambda c: G.sample_uniform(key_of(1), (3,), dtype=c["dtype"]),
+        "sample_uniform": lambda c: G.sample_uniform(
+            key_of(1), c["T"].get_batch_axes(), dtype=c["dtype"]
+        ),
         "exp": lambda c: G.exp(c["x"]),
         "log": lambda c: c["T"].log(),
         "multiply": lambda c: c["T"].multiply(c["U"]),
@@ -65,7 +70,7 @@ def public_calls(G: type) -> Dict[str, Call]:
         "hat": lambda c: G.hat(c["x"]),
         "vee": lambda c: G.vee(G.hat(c["x"])),
         "getitem": lambda c: c["T"][0],
-        "reshape": lambda c: c["T"].reshape(3, 1),
+        "reshape": lambda c: c["T"].reshape(*c["T"].get_batch_axes()[::-1]),
         "stack": lambda c: jaxlie_geo.stack([c["T"], c["U"]]),
         "jac_right": lambda c: G.jac_right(c["x"]),
         "jac_right_inv": lambda c: G.jac_right_inv(c["x"]),
