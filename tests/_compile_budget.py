@@ -127,7 +127,6 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         return
     workers = _WORKERS or [_COUNTER.summary()]
     total = sum(sum(w["programs"].values()) for w in workers)
-    config._compile_budget_total = total  # type: ignore[attr-defined]
     if _whole_run(config) and total > _budget():
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
