@@ -89,12 +89,13 @@ from typing import Dict, Iterable, List, Tuple
 import jax
 import jax.numpy as jnp
 
+from ._scalar import pow2_inverse
+
 __all__ = ["nearest_quaternion", "nearest_unit_complex"]
 
 _PAIRS = ((0, 1), (2, 3), (0, 2), (1, 3), (0, 3), (1, 2))
 _SYM = tuple((i, j) for i in range(4) for j in range(i, 4))
 _FULL = tuple((i, j) for i in range(4) for j in range(4))
-_BITS = {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}
 
 
 def _sweeps(dtype: jnp.dtype) -> int:
@@ -104,18 +105,8 @@ def _sweeps(dtype: jnp.dtype) -> int:
 
 def _pow2_scale(m: jax.Array) -> jax.Array:
     """2^k per matrix (the last two axes of ``m``), shape ``m.shape[:-2]``, with the largest
-    |entry| · 2^k in [1, 2); k is clipped so that 2^k is a normal float (for a zero matrix
-    any factor would do). Built from the exponent bits: exact, and cheaper than
-    ``frexp``/``ldexp``."""
-    fi = jnp.finfo(m.dtype)
-    int_t = _BITS[m.dtype.itemsize]
-    bias = fi.maxexp - 1
-    big = jnp.max(jnp.abs(m), axis=(-2, -1))
-    e = jax.lax.shift_right_logical(jax.lax.bitcast_convert_type(big, int_t), int_t(fi.nmant))
-    k = jnp.clip(int_t(bias) - e, 1 - bias, bias)
-    return jax.lax.bitcast_convert_type(
-        jax.lax.shift_left(k + int_t(bias), int_t(fi.nmant)), m.dtype
-    )
+    |entry| · 2^k in [1, 2) (``_scalar.pow2_inverse``)."""
+    return pow2_inverse(jnp.max(jnp.abs(m), axis=(-2, -1)))
 
 
 def _entries(m: jax.Array) -> List[List[jax.Array]]:
