@@ -52,19 +52,20 @@ def _w_inverse_apply(
 
         W⁻¹ = (D0 I − B ω̂ + ((B² − C D0)/A) ωωᵀ) / |φ|²,   |φ|² = D0² + θ²B² > 0 (θ < 2π).
 
-    (A, D0, B, C) are first scaled by the power of two nearest 1/A, exactly (W⁻¹ is
+    (A, D0, B, C) are first scaled by the power of two nearest 1/A (``pow2_inverse``),
+    exactly (W⁻¹ is
     homogeneous of degree −1 in them): |φ|² stays near 1 (≈ e^{2σ}/σ² otherwise, whose third
     negative power, in second derivatives, underflows float32 from σ ≈ 18). ω enters as
     k·u, the quaternion's vector part and the log's scale, without forming the rounded ω
     (as ``SE3.log``)."""
     a, d0, b, c = coeffs
     k = jnp.ones_like(a) if k is None else k
-    e = jnp.frexp(jax.lax.stop_gradient(a))[1]
-    a, d0, b, c = (jnp.ldexp(v, -e) for v in (a, d0, b, c))
+    scale = _scalar.pow2_inverse(jax.lax.stop_gradient(a))
+    a, d0, b, c = (v * scale for v in (a, d0, b, c))
     kb = k * b
     inv = 1.0 / (d0 * d0 + sq_norm(u) * kb * kb)
     g = (b * b - c * d0) * k * k / a
-    inv = jnp.ldexp(inv, -e)
+    inv = inv * scale
     return inv[..., None] * (
         d0[..., None] * t - kb[..., None] * cross(u, t) + (g * dot(u, t))[..., None] * u
     )
@@ -264,60 +265,91 @@ class Sim3(MatrixLieGroup):
         return block_matrix([[Y, skew(v), -v[..., None]], [None, W, None], [None, None, zero]])
 
     @classmethod
-    def _jac_blocks(cls, xi: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Array]:
-        """(W(−ξ), Q, c) of J_r(ξ) = [[W(−ξ), Q, c], [0, J_r(ω), 0], [0, 0, 1]].
+    def _jac_parts(cls, xi: jax.Array) -> Tuple[jax.Array, Tuple[jax.Array, ...], jax.Array]:
+        """(R, (A, D0, B, C), [W | ∂t/∂ω | ∂t/∂σ]) at ξ = (v, ω, σ), the last ``(*batch, 3, 7)``.
 
-        J_r = Σ (−ad ξ)ⁿ/(n+1)! is block triangular. Its translation row is
-        e^{−Y} ∂(W(Y) v)/∂(v, ω, σ) for Y = ω̂ + σI (the first-order change of the
-        translation of exp(ξ)⁻¹ exp(ξ + δ)): e^{−Y} W(Y) = W(−Y), and Q, c are the forward
-        derivatives of the translation kernel t(ω, σ) = W v (exact: the quadratures of
-        ``sim3_coefficients``' JVP), rotated and scaled by e^{−Y} = e^{−σ} Rᵀ."""
+        J_r = Σ (−ad ξ)ⁿ/(n+1)! is block triangular, [[W(−ξ), Q, c], [0, J_r(ω), 0],
+        [0, 0, 1]]. Its translation row is e^{−Y} ∂(W v)/∂(v, ω, σ) for Y = ω̂ + σI (the
+        first-order change of the translation of exp(ξ)⁻¹ exp(ξ + δ)), e^{−Y} = e^{−σ} Rᵀ.
+        With x = θ², the derivatives of t = W v = D0 v + B ω×v + C (ω·v) ω are
+
+            ∂t/∂σ = D0_σ v + B_σ ω×v + C_σ (ω·v) ω,
+            ∂t/∂ω = 2 (D0_x v + B_x ω×v + C_x (ω·v) ω) ωᵀ − B v̂ + C (ω vᵀ + (ω·v) I),
+
+        and every coefficient is a member of ``_scalar.sim3_family``, in closed form:
+        (D0, B, C)_σ = T_{1,0}, T_{1,1}, T_{1,2}; 2 D0_x = −T_{1,1}, 2 B_x = T_{0,3} − T_{1,2},
+        2 C_x = 2T_{0,4} − T_{1,3}."""
         v, w, sigma = xi[..., :3], xi[..., 3:6], xi[..., 6]
         x = sq_norm(w)
-        W_neg = _w_matrix(_scalar.sim3_coefficients(-sigma, x), -w)
-
-        def translation(w_: jax.Array, sigma_: jax.Array) -> jax.Array:
-            return _w_apply(_scalar.sim3_coefficients(sigma_, sq_norm(w_)), w_, v)
-
-        # the four directions (e_x, e_y, e_z, e_σ) in one vmapped JVP: one program, not four
-        eye = jnp.eye(4, dtype=xi.dtype)
-        dw = jnp.broadcast_to(
-            eye[:, None, :3].reshape((4,) + (1,) * (w.ndim - 1) + (3,)), (4, *w.shape)
+        a, d0, b, c, _, d1_0, d1_1, d1_2, d0_3, d1_3, d0_4 = _scalar.sim3_family(
+            sigma, x, _scalar.COEFFICIENTS_AND_DERIVATIVES
         )
-        ds = jnp.broadcast_to(eye[:, 3].reshape((4,) + (1,) * sigma.ndim), (4, *sigma.shape))
-        D = jax.vmap(lambda a, b: jax.jvp(translation, (w, sigma), (a, b))[1], out_axes=-1)(
-            dw, ds
-        )  # (*batch, 3, 4)
-        Rt = SO3(exp_quaternion(-w)).as_matrix()
-        D = jnp.exp(-sigma)[..., None, None] * matmul(Rt, D)
-        return W_neg, D[..., :3], D[..., 3:]
+        coeffs = (a, d0, b, c)
+        d1_0, d1_1, d1_2, d0_3, d1_3, d0_4 = (
+            k[..., None] for k in (d1_0, d1_1, d1_2, d0_3, d1_3, d0_4)
+        )
+        wxv = cross(w, v)
+        wv = dot(w, v)[..., None]
+        dt_dsigma = d1_0 * v + d1_1 * wxv + (d1_2 * wv) * w
+        radial = -d1_1 * v + (d0_3 - d1_2) * wxv + ((2.0 * d0_4 - d1_3) * wv) * w
+        bm, cm = b[..., None, None], c[..., None, None]
+        dt_dw = (
+            radial[..., :, None] * w[..., None, :]
+            - bm * skew(v)
+            + cm * (w[..., :, None] * v[..., None, :] + wv[..., None] * _eye3(xi))
+        )
+        M = jnp.concatenate([_w_matrix(coeffs, w), dt_dw, dt_dsigma[..., None]], axis=-1)
+        return SO3(exp_quaternion(w)).as_matrix(), coeffs, M
 
     @classmethod
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
-        """``(*batch, 7) -> (*batch, 7, 7)``: [[W(−ξ), Q, c], [0, J_r(ω), 0], [0, 0, 1]]
-        (``_jac_blocks``); W(−ξ) and J_r(ω) in closed form."""
+        """``(*batch, 7) -> (*batch, 7, 7)``: [[W(−ξ), Q, c], [0, J_r(ω), 0], [0, 0, 1]] with
+        [W(−ξ) | Q | c] = e^{−σ} Rᵀ [W | ∂t/∂ω | ∂t/∂σ] (``_jac_parts``), J_r(ω) in closed
+        form."""
         xi = cls._check_tangent(tangent, "jac_right")
-        W_neg, Q, c = cls._jac_blocks(xi)
+        R, _, M = cls._jac_parts(xi)
+        top = jnp.exp(-xi[..., 6])[..., None, None] * matmul(jnp.swapaxes(R, -1, -2), M)
         one = jnp.ones((*xi.shape[:-1], 1, 1), xi.dtype)
         return block_matrix(
-            [[W_neg, Q, c], [None, jac_right_so3(xi[..., 3:6]), None], [None, None, one]]
+            [
+                [top[..., :3], top[..., 3:6], top[..., 6:]],
+                [None, jac_right_so3(xi[..., 3:6]), None],
+                [None, None, one],
+            ]
         )
 
     @classmethod
     @override
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
         """``(*batch, 7) -> (*batch, 7, 7)``: the block inverse of ``jac_right``,
-        [[W⁻¹, −W⁻¹ Q J⁻¹, −W⁻¹ c], [0, J⁻¹, 0], [0, 0, 1]], with W(−ξ)⁻¹ and J_r(ω)⁻¹ in
-        closed form (no matrix inverse)."""
+        [[W(−ξ)⁻¹, −W(−ξ)⁻¹ Q J⁻¹, −W(−ξ)⁻¹ c], [0, J⁻¹, 0], [0, 0, 1]]; with
+        W(−ξ)⁻¹ = e^σ W⁻¹ R (W(−Y) = e^{−Y} W(Y)) its top row is
+        [e^σ W⁻¹ R, −W⁻¹ (∂t/∂ω) J⁻¹, −W⁻¹ ∂t/∂σ], W⁻¹ and J_r(ω)⁻¹ in closed form
+        (``_w_inverse_apply``; no matrix inverse)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
-        w, sigma = xi[..., 3:6], xi[..., 6]
-        _, Q, c = cls._jac_blocks(xi)
-        Wi = _w_matrix(_scalar.sim3_coefficients(-sigma, sq_norm(w)), -w, inverse=True)
+        w = xi[..., 3:6]
+        R, coeffs, M = cls._jac_parts(xi)
         Ji = jac_right_inv_so3(w)
+        X = jnp.concatenate(
+            [jnp.exp(xi[..., 6])[..., None, None] * R, -matmul(M[..., 3:6], Ji), -M[..., 6:]],
+            axis=-1,
+        )
+        # W⁻¹ applied to the seven columns at once (the columns as rows of Xᵀ)
+        top = jnp.swapaxes(
+            _w_inverse_apply(
+                tuple(k[..., None] for k in coeffs), w[..., None, :], jnp.swapaxes(X, -1, -2)
+            ),
+            -1,
+            -2,
+        )
         one = jnp.ones((*xi.shape[:-1], 1, 1), xi.dtype)
         return block_matrix(
-            [[Wi, -matmul(matmul(Wi, Q), Ji), -matmul(Wi, c)], [None, Ji, None], [None, None, one]]
+            [
+                [top[..., :3], top[..., 3:6], top[..., 6:]],
+                [None, Ji, None],
+                [None, None, one],
+            ]
         )
 
     # -- group operations -----------------------------------------------------------
