@@ -330,9 +330,10 @@ def F2(x: jax.Array, f0: Optional[jax.Array] = None) -> jax.Array:
     return _switched("F2", x, 10.0, closed)
 
 
-def C2(x: jax.Array) -> jax.Array:
-    """C2 = (θ² + 2 cos θ − 2)/(2θ⁴) = (½ − F1)/θ²; series below x = 12."""
-    return _switched("C2", x, 12.0, lambda x: (0.5 - F1(x)) / x)
+def C2(x: jax.Array, f1: Optional[jax.Array] = None) -> jax.Array:
+    """C2 = (θ² + 2 cos θ − 2)/(2θ⁴) = (½ − F1)/θ²; series below x = 12. Pass ``f1`` = F1(x)
+    when it is at hand (from ``half_angle``: k²/2) to save a sine."""
+    return _switched("C2", x, 12.0, lambda xc: (0.5 - (F1(xc) if f1 is None else f1)) / xc)
 
 
 def D(x: jax.Array) -> jax.Array:
@@ -736,6 +737,11 @@ def _moments_upto(sigma: jax.Array, e: jax.Array, n_max: int) -> list[jax.Array]
     return out
 
 
+def _recur_g(top: float, lower: jax.Array, x: jax.Array) -> jax.Array:
+    """(top − lower)/x: g_m = (1/(m−2)! − g_{m−2})/x above its switch."""
+    return (top - lower) / x
+
+
 def _g_list(m_max: int, x: jax.Array) -> list[jax.Array]:
     """[g₀(x), …, g_{m_max}(x)], g_m(x) = Σⱼ (−x)ʲ/(2j+m)!: cos θ, sin θ/θ, F1, F2, C2 from one
     ``half_angle`` (cos θ as 2cos²(θ/2) − 1 beyond π/2, where it does not round away 2),
@@ -743,17 +749,15 @@ def _g_list(m_max: int, x: jax.Array) -> list[jax.Array]:
     c, k = half_angle(x)
     f1 = 0.5 * k * k
     g = [jnp.where(c * c < 0.5, 2.0 * c * c - 1.0, 1.0 - x * f1), c * k, f1]
-    for m in range(3, m_max + 1):
+    g += [F2(x, g[1]), C2(x, f1)]
+    for m in range(5, m_max + 1):
         name = f"g{m}"
-        if name not in _COEFFS:
-            _COEFFS[name] = tuple(
-                float(Fraction((-1) ** j, math.factorial(2 * j + m))) for j in range(_N_MAX)
-            )
-        switch = {3: 10.0, 4: 12.0}.get(m, 30.0)
-        small = x < switch
-        xc = jnp.where(small, switch, x)
-        closed = (1.0 / math.factorial(m - 2) - jnp.where(small, 0.0, g[m - 2])) / xc
-        g.append(jnp.where(small, _horner(name, jnp.where(small, x, switch), switch), closed))
+        _COEFFS.setdefault(
+            name,
+            tuple(float(Fraction((-1) ** j, math.factorial(2 * j + m))) for j in range(_N_MAX)),
+        )
+        top, lower = 1.0 / math.factorial(m - 2), g[m - 2]
+        g.append(_switched(name, x, 30.0, functools.partial(_recur_g, top, lower)))
     return g[: m_max + 1]
 
 
@@ -812,7 +816,6 @@ def sim3_family(
         for m in range(max(m_max, 0) + 1)
     }
     n_max = max(p + (m + 2 * terms[m] - 2 if m >= 0 else 0) for p, m in index)
-    # read by several outputs: stored once (XLA:CPU would recompute them per output)
     moments = _moments_upto(s_x, e_x, n_max)
 
     def series(p: int, m: int) -> jax.Array:

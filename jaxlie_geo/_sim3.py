@@ -53,9 +53,9 @@ def _w_inverse_apply(
         W⁻¹ = (D0 I − B ω̂ + ((B² − C D0)/A) ωωᵀ) / |φ|²,   |φ|² = D0² + θ²B² > 0 (θ < 2π).
 
     (A, D0, B, C) are first scaled by the power of two nearest 1/A (``pow2_inverse``),
-    exactly (W⁻¹ is
-    homogeneous of degree −1 in them): |φ|² stays near 1 (≈ e^{2σ}/σ² otherwise, whose third
-    negative power, in second derivatives, underflows float32 from σ ≈ 18). ω enters as
+    exactly (W⁻¹ is homogeneous of degree −1 in them): |φ|² stays near 1 (≈ e^{2σ}/σ²
+    otherwise, whose third negative power, in second derivatives, underflows float32 from
+    σ ≈ 18). ω enters as
     k·u, the quaternion's vector part and the log's scale, without forming the rounded ω
     (as ``SE3.log``)."""
     a, d0, b, c = coeffs
@@ -71,13 +71,10 @@ def _w_inverse_apply(
     )
 
 
-def _w_matrix(coeffs: Tuple[jax.Array, ...], w: jax.Array, inverse: bool = False) -> jax.Array:
-    """W (or W⁻¹) as a ``(*batch, 3, 3)`` matrix."""
+def _w_matrix(coeffs: Tuple[jax.Array, ...], w: jax.Array) -> jax.Array:
+    """W as a ``(*batch, 3, 3)`` matrix."""
     eye = jnp.eye(3, dtype=w.dtype)
-    cols = [
-        (_w_inverse_apply if inverse else _w_apply)(coeffs, w, jnp.broadcast_to(e, w.shape))
-        for e in eye
-    ]
+    cols = [_w_apply(coeffs, w, jnp.broadcast_to(e, w.shape)) for e in eye]
     return jnp.stack(cols, axis=-1)
 
 
