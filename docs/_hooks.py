@@ -1,4 +1,11 @@
-"""MkDocs hooks: publish the benchmark pages from ``benchmarks/`` without copying them.
+"""MkDocs hooks: the maths rendered at build time, and the benchmark pages from
+``benchmarks/`` published without copying them.
+
+``pymdownx.arithmatex`` (generic mode) leaves each formula as TeX in a ``span`` (inline,
+``\\( … \\)``) or ``div`` (display, ``\\[ … \\]``) of class ``arithmatex``.
+``on_page_content`` replaces it by MathML from ``latex2mathml``, which browsers render
+natively: the pages need no script, font or network to show their formulas, also when
+opened from disk. A formula that does not convert fails the build, naming the page.
 
 The benchmark scripts generate ``benchmarks/RESULTS.md``, with its plot
 ``benchmarks/results.png`` beside it. ``on_files`` adds every Markdown and PNG file under
@@ -15,10 +22,13 @@ the site's own pages.
 
 from __future__ import annotations
 
+import html
 import posixpath
 import re
 from pathlib import Path
 
+from latex2mathml.converter import convert
+from mkdocs.exceptions import PluginError
 from mkdocs.structure.files import File, Files, InclusionLevel
 
 SOURCE = "benchmarks"
@@ -27,6 +37,24 @@ SUFFIXES = {".md", ".png"}
 
 # [text](target) and ![alt](target), with an optional "title"; target without spaces.
 _LINK = re.compile(r"(!?)\[([^\]\n]*)\]\(([^)\s]+)(\s+\"[^\"]*\")?\)")
+
+
+# arithmatex's generic output: the formula, HTML-escaped, inside its delimiters.
+_MATH = re.compile(r'<(span|div) class="arithmatex">\s*\\([(\[])(.*?)\\[)\]]\s*</\1>', re.DOTALL)
+
+
+def _mathml(match: re.Match, where: str) -> str:
+    tag, opening, tex = match.groups()
+    display = "block" if opening == "[" else "inline"
+    try:
+        math = convert(html.unescape(tex).strip(), display=display)
+    except Exception as error:  # latex2mathml raises its own exceptions for unknown TeX
+        raise PluginError(f"{where}: cannot render {tex.strip()!r} as MathML: {error}") from error
+    return f'<{tag} class="arithmatex">{math}</{tag}>'
+
+
+def on_page_content(content: str, page, config, files: Files) -> str:
+    return _MATH.sub(lambda m: _mathml(m, page.file.src_uri), content)
 
 
 def _root(config) -> Path:

@@ -41,6 +41,56 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+def _pages(site: Path) -> dict[Path, str]:
+    return {p: p.read_text(encoding="utf-8") for p in site.rglob("*.html")}
+
+
+_RESOURCE = re.compile(r"<(script|link|img|iframe|source)\b[^>]*?\b(?:src|href)=\"([^\"]*)\"", re.I)
+_HREF = re.compile(r"<a\b[^>]*?\bhref=\"([^\"#?]*)[^\"]*\"", re.I)
+
+
+def test_site_loads_nothing_from_the_network(site: Path) -> None:
+    """No script, stylesheet, image or frame comes from another host: the site, maths
+    included, reads the same offline (hyperlinks to other sites are fine)."""
+    remote = {
+        (page.relative_to(site).as_posix(), url)
+        for page, text in _pages(site).items()
+        for _, url in _RESOURCE.findall(text)
+        if re.match(r"^([a-z][a-z0-9+.-]*:)?//", url, re.I) and not url.startswith("data:")
+    }
+    assert not remote, sorted(remote)[:10]
+
+
+def test_maths_is_mathml_with_no_tex_left(site: Path) -> None:
+    """Every formula is MathML; no TeX delimiter survives outside a ``<math>`` element (the
+    text a reader without a script would see)."""
+    counted = 0
+    for page, text in _pages(site).items():
+        counted += text.count("<math ")
+        outside = re.sub(r"<math\b.*?</math>", "", text, flags=re.S)
+        outside = re.sub(r"<(script|code|pre)\b.*?</\1>", "", outside, flags=re.S | re.I)
+        for delimiter in ("\\(", "\\)", "\\[", "\\]", "$$"):
+            assert delimiter not in outside, (page.relative_to(site).as_posix(), delimiter)
+    assert counted >= 30  # the guide's formulas (34 when written)
+
+
+def test_links_resolve_to_files(site: Path) -> None:
+    """Every relative link names a file of the site (pages are files, not folders), so the
+    navigation works from disk (``file://``) as from a server. (Not the 404 page: only a
+    server shows it, at any address, so its links are absolute.)"""
+    missing = set()
+    for page, text in _pages(site).items():
+        if page.name == "404.html":
+            continue
+        for target in _HREF.findall(text):
+            if not target or re.match(r"^[a-z][a-z0-9+.-]*:", target, re.I):
+                continue
+            path = (page.parent / target).resolve()
+            if not path.is_file():
+                missing.add((page.relative_to(site).as_posix(), target))
+    assert not missing, sorted(missing)[:10]
+
+
 def _public() -> dict[str, object]:
     return {name: getattr(jaxlie_geo, name) for name in jaxlie_geo.__all__}
 
@@ -52,7 +102,7 @@ def _api_html(site: Path) -> str:
 def test_site_builds_with_the_benchmark_results(site: Path) -> None:
     assert (site / "index.html").is_file()
     # benchmarks/RESULTS.md and its plot, added by docs/_hooks.py, not copied into docs/.
-    assert (site / "benchmarks" / "RESULTS" / "index.html").is_file()
+    assert (site / "benchmarks" / "RESULTS.html").is_file()
     assert (site / "benchmarks" / "results.png").is_file()
     assert not (DOCS / "benchmarks").exists()
 
@@ -64,7 +114,7 @@ def test_every_public_module_has_its_own_api_page(site: Path) -> None:
         page = DOCS / "api" / f"{name}.md"
         assert page.is_file(), f"no API page docs/api/{name}.md for jaxlie_geo.{name}"
         assert f"::: jaxlie_geo.{name}" in page.read_text(encoding="utf-8"), page
-        html = (site / "api" / name / "index.html").read_text(encoding="utf-8")
+        html = (site / "api" / f"{name}.html").read_text(encoding="utf-8")
         for member in getattr(jaxlie_geo, name).__all__:
             assert f'id="jaxlie_geo.{name}.{member}"' in html, f"jaxlie_geo.{name}.{member}"
 
@@ -82,7 +132,7 @@ def test_every_public_class_and_function_is_in_the_api_reference(site: Path) -> 
 @pytest.mark.parametrize("group", ["SO2", "SE2", "SO3", "SE3"])
 def test_each_group_page_shows_every_public_method(site: Path, group: str) -> None:
     """Inherited and docstring-less overrides included (they take the base's docstring)."""
-    html = (site / "api" / group.lower() / "index.html").read_text(encoding="utf-8")
+    html = (site / "api" / f"{group.lower()}.html").read_text(encoding="utf-8")
     cls = getattr(jaxlie_geo, group)
     names = [n for n in dir(cls) if not n.startswith("_")]
     missing = [n for n in names if f'id="jaxlie_geo.{group}.{n}"' not in html]
