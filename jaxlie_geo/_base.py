@@ -503,7 +503,7 @@ class MatrixLieGroup(abc.ABC):
         e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3)."""
         n, d = cls.matrix_dim, cls.space_dim
         coords = [points[..., i] for i in range(d)]
-        if n > d:  # homogeneous coordinates (p, 1, 0, …): SE_2(3)'s velocity column reads 0
+        if n > d:  # homogeneous coordinates (p, 1, 0, …): SE₂(3)'s velocity column reads 0
             coords.append(jnp.ones_like(coords[0]))
             coords.extend(jnp.zeros_like(coords[0]) for _ in range(n - d - 1))
         with jax.ensure_compile_time_eval():

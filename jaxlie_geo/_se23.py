@@ -1,4 +1,4 @@
-"""SE_2(3): extended poses (rotation, position, velocity), the group of inertial navigation.
+"""SE₂(3): extended poses (rotation, position, velocity), the group of inertial navigation.
 
 Elements are the 5×5 matrices [[R, p, v], [0, 1, 0], [0, 0, 1]] (Barrau and Bonnabel,
 *The invariant extended Kalman filter as a stable observer*, 2017, §III): SO(3) acting on
