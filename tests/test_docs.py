@@ -91,6 +91,21 @@ def test_links_resolve_to_files(site: Path) -> None:
     assert not missing, sorted(missing)[:10]
 
 
+def test_group_pages_list_members_in_one_order(site: Path) -> None:
+    """The members every group has appear in the same order on every group's API page."""
+    groups = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
+    members = {
+        g: re.findall(
+            rf'id="jaxlie_geo\.{g}\.(\w+)"', (site / "api" / f"{g.lower()}.html").read_text()
+        )
+        for g in groups
+    }
+    common = set.intersection(*(set(m) for m in members.values()))
+    assert len(common) > 20
+    orders = {g: [m for m in ms if m in common] for g, ms in members.items()}
+    assert all(order == orders["SO3"] for order in orders.values()), orders
+
+
 def _public() -> dict[str, object]:
     return {name: getattr(jaxlie_geo, name) for name in jaxlie_geo.__all__}
 
