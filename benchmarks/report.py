@@ -197,6 +197,17 @@ def _date(info: dict) -> str:
     return info.get("date", "?").split()[0]
 
 
+def _commit(info: dict) -> str:
+    """The commit a run measured, and the files that differed from it if the tree had
+    uncommitted changes (``run.py`` records them as ``dirty_files``)."""
+    commit = info.get("commit", "?")
+    if not commit.endswith("-dirty"):
+        return commit
+    files = info.get("dirty_files")
+    changed = ", ".join(f"`{f}`" for f in files) if files else "files not recorded"
+    return f"{commit[: -len('-dirty')]} with uncommitted changes ({changed})"
+
+
 def machine_order(raw: dict) -> list:
     """CPUs before GPUs; among each, the machine with the newest speed run first."""
 
@@ -881,8 +892,8 @@ def _change_table(before: dict, after: dict) -> list:
     lines = [
         f"### {label(info)}, {dtype}",
         "",
-        f"Before: commit {was.get('commit', '?')}, measured {_date(was)}; after: commit "
-        f"{info.get('commit', '?')}, measured {_date(info)}; jax {info.get('jax', '?')}. Time "
+        f"Before: commit {_commit(was)}, measured {_date(was)}; after: commit "
+        f"{_commit(info)}, measured {_date(info)}; jax {info.get('jax', '?')}. Time "
         "per element of jaxlie_geo, and its speed-up over jaxlie measured in the same run.",
         "",
     ]

@@ -186,6 +186,21 @@ def git_commit() -> str:
         return "unknown"
 
 
+def dirty_files() -> list:
+    """The tracked files that differ from the commit (``git status``), so that a page
+    rendered from a run of a modified tree says which files differed."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", _REPO_ROOT, "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+        return sorted(line[3:].strip() for line in out.stdout.splitlines() if line.strip())
+    except (OSError, subprocess.SubprocessError):
+        return []
+
+
 def machine_info(command: str, **run) -> dict:
     """The machine and the versions a run used (the ``machine`` entry of a raw file), then
     the run's own fields (dtype, ...) and its command line."""
@@ -206,6 +221,7 @@ def machine_info(command: str, **run) -> dict:
         "jaxlie": version_of("jaxlie"),
         "jaxlie_geo": getattr(geo, "__version__", version_of("jaxlie_geo")),
         "commit": git_commit(),
+        "dirty_files": dirty_files(),
         "numpy": version_of("numpy"),
         "backend": jax.default_backend(),
         "devices": ", ".join(str(d) for d in jax.devices()),

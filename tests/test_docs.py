@@ -211,3 +211,19 @@ def test_results_page_is_generated_from_the_raw_results() -> None:
         timeout=300,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_results_page_names_the_files_of_a_modified_tree() -> None:
+    """A run measured on a tree with uncommitted changes is shown as such, with the files
+    that differed where the run recorded them, never as a bare ``-dirty`` commit."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    try:
+        import report
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+    assert report._commit({"commit": "abc1234"}) == "abc1234"
+    assert report._commit({"commit": "abc1234-dirty", "dirty_files": ["a.py", "b.py"]}) == (
+        "abc1234 with uncommitted changes (`a.py`, `b.py`)"
+    )
+    assert "files not recorded" in report._commit({"commit": "abc1234-dirty"})
+    assert "-dirty" not in (REPO / "benchmarks" / "RESULTS.md").read_text(encoding="utf-8")
