@@ -851,7 +851,7 @@ def main(argv=None) -> Dict[str, Any]:
     )
     files.add_argument(
         "--linear-solver",
-        choices=("auto", "cholesky", "pcg"),
+        choices=("auto", "cholesky", "cholmod", "qdldl", "pcg"),
         default="auto",
         help="sparse Cholesky on the host, conjugate gradients on the device, or auto",
     )

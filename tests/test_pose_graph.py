@@ -345,14 +345,18 @@ def test_gradient_vanishes_at_the_optimum(dim: int) -> None:
 
 @over_dims
 def test_gauss_newton_and_levenberg_marquardt_with_cholesky_and_pcg_agree(dim: int) -> None:
-    """Gauss–Newton, and Levenberg–Marquardt with the sparse Cholesky and with conjugate
-    gradients, converge to the same cost (1e-8 relative) and poses (1e-7), at a tight
-    tolerance."""
+    """Gauss–Newton, and Levenberg–Marquardt with each sparse Cholesky (CHOLMOD, QDLDL) and
+    with conjugate gradients, converge to the same cost (1e-8 relative) and poses (1e-7), at
+    a tight tolerance; ``"cholesky"`` is CHOLMOD where cvxopt is installed (it is, with the
+    test extra)."""
     solutions = {
         "gn": _solved(dim, method="gn", tolerance=TIGHT),
         "lm-cholesky": _solved(dim, linear_solver="cholesky", tolerance=TIGHT),
+        "lm-cholmod": _solved(dim, linear_solver="cholmod", tolerance=TIGHT),
+        "lm-qdldl": _solved(dim, linear_solver="qdldl", tolerance=TIGHT),
         "lm-pcg": _solved(dim, linear_solver="pcg", tolerance=TIGHT),
     }
+    assert solutions["lm-cholesky"].costs.tolist() == solutions["lm-cholmod"].costs.tolist()
     want = solutions["lm-cholesky"]
     for name, solution in solutions.items():
         assert solution.converged, (name, solution.stop_reason)
@@ -362,6 +366,51 @@ def test_gauss_newton_and_levenberg_marquardt_with_cholesky_and_pcg_agree(dim: i
     assert _solved(dim, tolerance=TIGHT).costs[-1] == want.costs[-1]  # "auto": Cholesky on a CPU
     one_device = solve(_case(dim).graph, tolerance=TIGHT, devices=jax.devices()[:1])
     assert one_device.costs[-1] == want.costs[-1]
+
+
+@pytest.mark.parametrize("backend", ["cholmod", "qdldl"])
+def test_sparse_cholesky_solves_each_damping_against_numpy(backend: str) -> None:
+    """The host factorisations, refactorised at several dampings of one pattern (as a
+    Levenberg–Marquardt loop does), each solve (H + λD) δ = −g to rounding against
+    ``numpy.linalg.solve`` of the dense matrix."""
+    from jaxlie_geo.pose_graph._linear import BlockPattern, SparseCholesky
+
+    rng = np.random.default_rng(3)
+    n, k = 12, 6
+    edge_i = np.concatenate([np.arange(n - 1), rng.integers(0, n, 8)])
+    edge_j = np.concatenate([np.arange(1, n), rng.integers(0, n, 8)])
+    keep = edge_i != edge_j
+    pattern = BlockPattern(edge_i[keep], edge_j[keep], n, k)
+    size = pattern.size
+    # A positive definite matrix on the pattern: its upper triangle, as the solver stores it.
+    dense = np.zeros((size, size))
+    rows = pattern.indices
+    cols = np.repeat(np.arange(size), np.diff(pattern.indptr))
+    dense[rows, cols] = rng.normal(size=pattern.nnz)
+    dense = dense + dense.T + 4.0 * size * np.eye(size)
+    data = dense[rows, cols]
+    solver = SparseCholesky(pattern, backend)
+    g = rng.normal(size=size)
+    for lam in (0.0, 1e-3, 10.0, 0.0):
+        damping = lam * np.abs(np.diagonal(dense))
+        got = solver.solve(data, damping, g)
+        want = np.linalg.solve(dense + np.diag(damping), -g)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14, err_msg=f"λ = {lam}")
+
+
+def test_cholesky_falls_back_to_qdldl_without_cvxopt(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without cvxopt (an optional, GPL-licensed extra), ``"cholesky"`` and ``"auto"``
+    factorise with QDLDL, step for step as ``linear_solver="qdldl"``, and ``"cholmod"``
+    raises ``ImportError`` naming the extra to install."""
+    want = _solved(3, linear_solver="qdldl", tolerance=TIGHT)
+    monkeypatch.setitem(sys.modules, "cvxopt", None)  # makes `import cvxopt` fail
+    monkeypatch.setitem(sys.modules, "cvxopt.cholmod", None)
+    graph = _case(3).graph
+    for name in ("cholesky", "auto"):
+        got = solve(graph, linear_solver=name, tolerance=TIGHT)
+        assert got.costs.tolist() == want.costs.tolist(), name
+    with pytest.raises(ImportError, match=r"jaxlie_geo\[cholmod\]"):
+        solve(graph, linear_solver="cholmod")
 
 
 @over_dims

@@ -5,12 +5,18 @@ diagonal for every pair of poses joined by an edge; g = Σ Aᵀ e. Two ways to s
 
 - **Sparse Cholesky on the host.** The blocks are summed into the upper triangle of H in
   compressed-column form, through a scatter map built once per graph (its pattern never
-  changes), and factorised by QDLDL (Stellato, Banjac, Goulart, Bemporad and Boyd, *OSQP:
-  an operator splitting solver for quadratic programs*, 2020, §5.1), the square-root-free
-  Cholesky factorisation LDLᵀ with an approximate-minimum-degree ordering. Its Python
-  package ``qdldl`` installs from wheels on Linux, macOS and Windows with only NumPy and
-  SciPy, and refactorises a matrix of unchanged pattern without a new symbolic analysis,
-  which a Levenberg–Marquardt loop does at every damping it tries.
+  changes), and factorised with a symbolic analysis once per graph and a numeric
+  factorisation at every damping a Levenberg–Marquardt loop tries, by one of two packages:
+
+  * CHOLMOD (Chen, Davis, Hager and Rajamanickam, *Algorithm 887: CHOLMOD, supernodal
+    sparse Cholesky factorization and update/downdate*, ACM TOMS 35(3), 2008) through
+    ``cvxopt`` (``cvxopt.cholmod``), supernodal. cvxopt is GPL-3 licensed, as CHOLMOD's
+    supernodal module is: an optional extra (``jaxlie_geo[cholmod]``), never a dependency.
+  * QDLDL (Stellato, Banjac, Goulart, Bemporad and Boyd, *OSQP: an operator splitting
+    solver for quadratic programs*, 2020, §5.1), the square-root-free LDLᵀ with an
+    approximate-minimum-degree ordering, Apache-2.0 (``jaxlie_geo[pose-graph]``): the
+    fallback. Its supernodes are single columns, so the blocks of a 3D graph factorise
+    several times slower (``docs/design/pose-graph-solver.md``).
 - **Preconditioned conjugate gradients** (``jax.scipy.sparse.linalg.cg``) on any device,
   matrix-free: H x = Σ Aᵀ(A x) over the edges, which shard across devices with the edges.
   The preconditioner is block Jacobi: the inverse of H's k × k diagonal blocks.
@@ -99,22 +105,39 @@ class BlockPattern:
         return onp.bincount(self.scatter, weights=values, minlength=self.nnz)
 
 
-class SparseCholesky:
-    """(H + λD) δ = −g by QDLDL on the host; the symbolic analysis is done once."""
+def installed(backend: str) -> bool:
+    """Whether the package of a sparse Cholesky backend (``"cholmod"``, ``"qdldl"``)
+    imports."""
+    modules = {"cholmod": ("cvxopt", "cvxopt.cholmod"), "qdldl": ("qdldl", "scipy.sparse")}
+    try:
+        for module in modules[backend]:
+            importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
 
-    def __init__(self, pattern: BlockPattern):
-        try:
-            qdldl = importlib.import_module("qdldl")
-            scipy_sparse = importlib.import_module("scipy.sparse")
-        except ImportError as error:  # pragma: no cover - exercised only without the extra
+
+class SparseCholesky:
+    """(H + λD) δ = −g on the host by CHOLMOD (``backend="cholmod"``) or QDLDL
+    (``"qdldl"``); the symbolic analysis is done once, on the first ``solve``."""
+
+    def __init__(self, pattern: BlockPattern, backend: str = "qdldl"):
+        if backend not in ("cholmod", "qdldl"):
+            raise ValueError(
+                f"SparseCholesky: backend must be 'cholmod' or 'qdldl', got {backend!r}"
+            )
+        if not installed(backend):
+            extra, package = (
+                ("cholmod", "cvxopt") if backend == "cholmod" else ("pose-graph", "qdldl")
+            )
             raise ImportError(
-                "linear_solver='cholesky' needs the qdldl and scipy packages: "
-                "pip install 'jaxlie_geo[pose-graph]', or use linear_solver='pcg'."
-            ) from error
-        self._qdldl = qdldl
-        self._csc = scipy_sparse.csc_matrix
+                f"linear_solver={backend!r} needs the {package} package: pip install "
+                f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
+            )
+        self.backend = backend
         self.pattern = pattern
         self._solver: Optional[Any] = None
+        self._matrix: Optional[Any] = None
 
     def solve(self, data: onp.ndarray, damping: onp.ndarray, g: onp.ndarray) -> onp.ndarray:
         """δ for the nonzeros ``data`` of H, the diagonal ``damping`` λD added, and the
@@ -122,12 +145,50 @@ class SparseCholesky:
         pat = self.pattern
         damped = data.copy()
         damped[pat.diagonal] += damping
-        matrix = self._csc((damped, pat.indices, pat.indptr), shape=(pat.size, pat.size))
+        if self.backend == "cholmod":
+            return self._solve_cholmod(damped, g)
+        csc = importlib.import_module("scipy.sparse").csc_matrix
+        matrix = csc((damped, pat.indices, pat.indptr), shape=(pat.size, pat.size))
         if self._solver is None:
-            self._solver = self._qdldl.Solver(matrix, upper=True)
+            self._solver = importlib.import_module("qdldl").Solver(matrix, upper=True)
         else:
             self._solver.update(matrix, upper=True)
         return -self._solver.solve(g)
+
+    def _solve_cholmod(self, damped: onp.ndarray, g: onp.ndarray) -> onp.ndarray:
+        cvxopt = importlib.import_module("cvxopt")
+        cholmod = importlib.import_module("cvxopt.cholmod")
+        pat = self.pattern
+        if self._matrix is None:
+            # Built once in compressed-column order (sorted, no duplicates), so that its
+            # values are ``damped`` in the same order; the symbolic analysis once too.
+            cols = onp.repeat(onp.arange(pat.size), onp.diff(pat.indptr))
+            self._matrix = cvxopt.spmatrix(
+                cvxopt.matrix(damped),
+                cvxopt.matrix(pat.indices.astype(onp.int64)),
+                cvxopt.matrix(cols.astype(onp.int64)),
+                (pat.size, pat.size),
+            )
+            if list(self._matrix.I) != pat.indices.tolist():  # pragma: no cover
+                raise AssertionError("cvxopt reordered the compressed-column pattern")
+            saved = cholmod.options.get("supernodal")
+            cholmod.options["supernodal"] = 2  # supernodal (2), not simplicial (0) or chosen
+            try:
+                self._solver = cholmod.symbolic(self._matrix, uplo="U")
+            finally:  # cvxopt's options are global: leave them as they were
+                if saved is None:
+                    del cholmod.options["supernodal"]
+                else:
+                    cholmod.options["supernodal"] = saved
+        else:
+            self._matrix.V = cvxopt.matrix(damped)  # (``V`` is a copy: ``V[:] =`` is lost)
+        try:
+            cholmod.numeric(self._matrix, self._solver)
+        except ArithmeticError:  # not positive definite: a non-finite step, as QDLDL gives
+            return onp.full(pat.size, onp.nan)
+        x = cvxopt.matrix(-g)
+        cholmod.solve(self._solver, x)
+        return onp.asarray(x).ravel()
 
 
 def pcg(

@@ -37,6 +37,7 @@ from ._linear import (
     SparseCholesky,
     gradient_and_diagonal,
     hessian_values,
+    installed,
     pcg,
 )
 
@@ -170,13 +171,15 @@ def _try_step(
 class _CholeskyPath:
     """Linearise on the device, assemble and factorise on the host."""
 
-    def __init__(self, G, robust, graph: PoseGraph, p: Problem, diagonal_damping: bool):
+    def __init__(
+        self, G, robust, graph: PoseGraph, p: Problem, diagonal_damping: bool, backend: str
+    ):
         self.G, self.robust, self.n, self.p = G, robust, graph.num_poses, p
         self.diagonal_damping = diagonal_damping
         k = TANGENT_DIM[graph.dim]
         self.k = k
         self.pattern = BlockPattern(onp.asarray(p.edge_i), onp.asarray(p.edge_j), self.n, k)
-        self.cholesky = SparseCholesky(self.pattern)
+        self.cholesky = SparseCholesky(self.pattern, backend)
 
     def linearise(self, poses: jax.Array) -> float:
         c, values, g = _cholesky_system(self.G, self.robust, self.n, poses, self.p)
@@ -252,7 +255,7 @@ def solve(
     graph: PoseGraph,
     *,
     method: Literal["lm", "gn"] = "lm",
-    linear_solver: Literal["auto", "cholesky", "pcg"] = "auto",
+    linear_solver: Literal["auto", "cholesky", "cholmod", "qdldl", "pcg"] = "auto",
     robust: Optional[RobustKernel] = None,
     anchor_sigma: float = 1e-6,
     max_iterations: int = 100,
@@ -276,10 +279,12 @@ def solve(
         graph: the graph; ``graph.poses`` is the initial estimate.
         method: ``"lm"`` Levenberg–Marquardt, or ``"gn"`` Gauss–Newton (every step taken;
             it stops, keeping the previous estimate, if a step raises the cost).
-        linear_solver: ``"cholesky"`` (sparse LDLᵀ on the host, needs the ``pose-graph``
-            extra), ``"pcg"`` (conjugate gradients on the device, block-Jacobi
-            preconditioner), or ``"auto"``: Cholesky when its package is installed and the
-            poses live on a CPU, PCG otherwise.
+        linear_solver: ``"cholmod"`` (CHOLMOD's supernodal Cholesky on the host, through
+            ``cvxopt``: the ``cholmod`` extra, GPL-3), ``"qdldl"`` (QDLDL's sparse LDLᵀ on
+            the host: the ``pose-graph`` extra), ``"cholesky"`` (CHOLMOD if installed,
+            else QDLDL), ``"pcg"`` (conjugate gradients on the device, block-Jacobi
+            preconditioner), or ``"auto"``: ``"cholesky"`` when one of its packages is
+            installed and the poses live on a CPU, PCG otherwise.
         robust: ``Huber(k)`` or ``Cauchy(k)``, on every edge (not the anchor).
         anchor_sigma: σ of the prior that holds the first pose at its initial value.
         max_iterations: the most accepted steps.
@@ -307,9 +312,10 @@ def solve(
     """
     if method not in ("lm", "gn"):
         raise ValueError(f"solve: method must be 'lm' or 'gn', got {method!r}")
-    if linear_solver not in ("auto", "cholesky", "pcg"):
+    if linear_solver not in ("auto", "cholesky", "cholmod", "qdldl", "pcg"):
         raise ValueError(
-            f"solve: linear_solver must be 'auto', 'cholesky' or 'pcg', got {linear_solver!r}"
+            "solve: linear_solver must be 'auto', 'cholesky', 'cholmod', 'qdldl' or 'pcg', "
+            f"got {linear_solver!r}"
         )
     for name, value in [
         ("anchor_sigma", anchor_sigma),
@@ -330,6 +336,8 @@ def solve(
         raise ValueError("solve: an edge joins a pose to itself")
     _check_connected(graph)
     chosen = _default_solver(devices) if linear_solver == "auto" else linear_solver
+    if chosen == "cholesky":
+        chosen = "cholmod" if installed("cholmod") else "qdldl"
     with jax.enable_x64(True):
         return _solve(
             graph, method, chosen, robust, anchor_sigma, max_iterations, tolerance,
@@ -356,11 +364,7 @@ def _check_connected(graph: PoseGraph) -> None:
 
 def _default_solver(devices: Optional[Sequence[Any]]) -> str:
     platform = (devices[0] if devices else jax.devices()[0]).platform
-    if platform != "cpu":
-        return "pcg"
-    try:
-        importlib.import_module("qdldl")
-    except ImportError:
+    if platform != "cpu" or not (installed("cholmod") or installed("qdldl")):
         return "pcg"
     return "cholesky"
 
@@ -373,8 +377,8 @@ def _solve(
     G = graph.group
     p, poses = _problem(graph, anchor_sigma, devices)
     system: Any
-    if linear_solver == "cholesky":
-        system = _CholeskyPath(G, robust, graph, p, diagonal_damping)
+    if linear_solver in ("cholmod", "qdldl"):
+        system = _CholeskyPath(G, robust, graph, p, diagonal_damping, linear_solver)
     else:
         system = _PCGPath(G, robust, graph, p, diagonal_damping, cg_tolerance, cg_max_iterations)
     bar = _Progress(progress, max_iterations)
