@@ -34,45 +34,20 @@ in V; K → VᵀKV becomes diagonal, and the column of V at its largest diagonal
 eigenvector. Jacobi converges quadratically whatever the spectrum, to an eigenvector as
 accurate as its conditioning allows (error about ε/gap), also for repeated eigenvalues,
 where any vector of the top eigenspace is a nearest rotation. Sweeps: 4 (float32 and
-narrower), 5 (float64); against 8 sweeps on the sets below, one fewer left errors up to
-2·10⁵ ulp (float32) and 10⁸ ulp (float64), while the chosen counts agree within 0.5 ulp. A
-last multiplication by K + cI, c = max(λ₁/3, −(λ₁ + λ_min)/2) from Jacobi's eigenvalues,
-leaves the top eigenvector, amplifies no other component, and brings a near-rotation back
-to rounding. There is no data-dependent branch and no loop with a data-dependent count:
-each element's result depends on that element alone, and a batch sharded over several
-devices is computed without communication.
+narrower), 5 (float64). A last multiplication by K + cI, c = max(λ₁/3, −(λ₁ + λ_min)/2)
+from Jacobi's eigenvalues, leaves the top eigenvector, amplifies no other component, and
+brings a near-rotation back to rounding. There is no data-dependent branch and no loop with
+a data-dependent count: each element's result depends on that element alone, and a batch
+sharded over several devices is computed without communication.
 
-Starting Jacobi from Shepperd's estimate instead (K expressed in the basis of q₀ ⊗ eᵢ, that
-is, the K of R(q₀)ᵀM, nearly diag(3, −1, −1, −1) for a near-rotation) saves no sweep for a
-fixed count that covers every input: the rotations within the nearly degenerate block of
-the −1 eigenvalues refill the zeroed entries of the first row, and Gaussian matrices and
-noisy reflections still need 4 (float32) and 5 (float64) sweeps.
-
-Accuracy, against a long-double reference (K's eigenvector refined by Rayleigh-quotient
-iteration), as the largest entry error of the rotation matrix, over 20 000 matrices each of:
-rotations; rotations with Gaussian noise of 1e-6, 1e-3, 1e-1 and 0.3; Gaussian matrices;
-reflections with noise 0.1; rank-2 matrices. Float32 and float64 alike: at most 2.0 ulp for
-the rotations and the noisy rotations, and at most 1.3 ulp · κ everywhere, κ =
-(d1 + d2 + d3)/(d2 + d3) the conditioning of the nearest rotation (Gaussian matrices: up to
-35 ulp in float32, 108 in float64). (Measured with a two-stage form that sent rotations to
-a power iteration; for the Jacobi sweeps alone, float32 against numpy's float64 SVD
-projection, the quaternion's exact rotation matrix is within 1.66 ulp for 20 000
-rotations, 2.03 ulp with noise up to 0.1, and 2.59 ulp with noise 0.3.) The quaternion of
-a rotation is within 2 ulp of jaxlie's (Shepperd's), and of mpmath's within 4 ulp at and
-near π (``tests``).
-
-Speed (CPU, 2 cores, jit, 10⁶ matrices): the same for every input, rotations or not, about
-0.5 s in float32 and 0.75–1.4 s in float64 (timings on a shared machine); the Jacobi sweeps
-dominate, about 110 ms per sweep at 10⁶ float32 matrices on XLA:CPU, whether the sweeps are
-a ``fori_loop`` or unrolled. Alternatives measured: ``jnp.linalg.eigh`` on the batch of K took
-13.5x Shepperd's time (10⁶ float32 matrices), and its derivative is NaN whenever K has a
-repeated eigenvalue (any rotation: −1 is triple); power iteration alone, or repeated
-squaring of K + cI, converges with a ratio near 1 for ill-conditioned inputs (Gaussian
-matrices still 10⁶ ulp away after 2⁸ steps); Rayleigh-quotient iteration from such a start
-may converge to another eigenvector. A power iteration certified per element is cheaper
-for near-rotations, but choosing it or Jacobi for a whole batch makes one element's
-arithmetic depend on the others (and costs a reduction across devices), while choosing per
-element pays for both.
+Accuracy (the largest entry error of the rotation matrix against a long-double reference,
+float32 and float64): at most 2 ulp for rotations and rotations with noise up to 0.1, and at
+most 1.3 ulp · κ for any matrix, κ = (d1 + d2 + d3)/(d2 + d3) the conditioning of the nearest
+rotation; the quaternion of a rotation is within 2 ulp of Shepperd's formulas (jaxlie's),
+and within 4 ulp of mpmath's at and near π (``tests/test_from_matrix.py``). The
+measurements, the sweep counts and the alternatives measured (``jnp.linalg.eigh``, power
+iteration, a Shepperd start, Horn's characteristic polynomial) are in
+``docs/design/nearest-rotation.md``.
 
 Derivative (a custom JVP, exact whatever the iteration): with R the result, S = RᵀM is
 symmetric at the optimum, so M = RS, Ṁ = ṘS + RṠ and Ṙ = R ω̂ give RᵀṀ − ṀᵀR = ω̂S + Sω̂,

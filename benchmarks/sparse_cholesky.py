@@ -1,0 +1,137 @@
+#!/usr/bin/env python
+"""The sparse factorisations of the pose-graph solver on each public dataset's normal matrix.
+
+For each dataset in ``gtsam``'s wheel, H + λI at the initial estimate (the matrix the
+solver's first Levenberg–Marquardt step factorises, λ = 1e-5) is factorised and solved by:
+
+* QDLDL (``qdldl``): the symbolic analysis and first factorisation, then a refactorisation
+  of the same pattern (``update``) and solve;
+* CHOLMOD through ``cvxopt``, simplicial and supernodal: ``cholmod.symbolic`` once, then
+  ``cholmod.numeric`` and ``cholmod.solve``.
+
+Times are the median of ``--repeats`` refactorisations (one thread each, the process
+alone), with the first (analysis included) reported apart. Every solution is checked
+against QDLDL's to 1e-8 relative. Prints a Markdown table; the design note
+``docs/design/pose-graph-solver.md`` quotes it.
+
+  python benchmarks/sparse_cholesky.py
+  python benchmarks/sparse_cholesky.py --datasets sphere2500 --repeats 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+import run as _run  # benchmarks/run.py: machine facts; also puts the repo root on sys.path
+
+DATASETS = {
+    "w10000": ("w10000", {}),
+    "sphere2500": ("sphere2500", {}),
+    "pose3example-grid": ("pose3example-grid", {}),
+    "w20000": ("w20000", {"information_order": "g2o"}),
+}
+
+
+def normal_matrix(name: str):
+    """(pattern, upper-triangle values of H + 1e-5·I, g) at the dataset's initial poses."""
+    import gtsam
+    import jax
+
+    from jaxlie_geo import pose_graph
+    from jaxlie_geo.pose_graph import _solver
+
+    file, options = DATASETS[name]
+    graph = pose_graph.read(gtsam.findExampleDataFile(file), **options)
+    with jax.enable_x64(True):
+        p, poses = _solver._problem(graph, 1e-6, None)
+        path = _solver._CholeskyPath(graph.group, None, graph, p, False, "qdldl")
+        path.linearise(poses)
+    data = path.data.copy()
+    data[path.pattern.diagonal] += 1e-5
+    return path.pattern, data, path.g
+
+
+def timed(f, repeats: int):
+    first = time.perf_counter()
+    out = f(True)
+    first = time.perf_counter() - first
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = f(False)
+        times.append(time.perf_counter() - t)
+    return first, statistics.median(times), out
+
+
+def measure(name: str, repeats: int) -> dict:
+    import cvxopt
+    import cvxopt.cholmod as cholmod
+    import qdldl
+    import scipy.sparse as sparse
+
+    pattern, data, g = normal_matrix(name)
+    n = pattern.size
+    matrix = sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(n, n))
+    solver = {}
+
+    def run_qdldl(first: bool):
+        if first:
+            solver["q"] = qdldl.Solver(matrix, upper=True)
+        else:
+            solver["q"].update(matrix, upper=True)
+        return solver["q"].solve(-g)
+
+    row = {"unknowns": n, "nonzeros (upper)": pattern.nnz}
+    row["qdldl"] = timed(run_qdldl, repeats)
+    want = row["qdldl"][2]
+    cols = np.repeat(np.arange(n), np.diff(pattern.indptr))
+    for mode, supernodal in (("cholmod simplicial", 0), ("cholmod supernodal", 2)):
+        A = cvxopt.spmatrix(
+            cvxopt.matrix(data),
+            cvxopt.matrix(pattern.indices.astype(np.int64)),
+            cvxopt.matrix(cols.astype(np.int64)),
+            (n, n),
+        )
+
+        def run_cholmod(first: bool, A=A, supernodal=supernodal):
+            if first:
+                cholmod.options["supernodal"] = supernodal
+                solver["c"] = cholmod.symbolic(A, uplo="U")
+            A.V = cvxopt.matrix(data)
+            cholmod.numeric(A, solver["c"])
+            x = cvxopt.matrix(-g)
+            cholmod.solve(solver["c"], x)
+            return np.asarray(x).ravel()
+
+        row[mode] = timed(run_cholmod, repeats)
+        got = row[mode][2]
+        assert np.allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(want).max()), (name, mode)
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--datasets", nargs="*", default=list(DATASETS))
+    parser.add_argument("--repeats", type=int, default=10)
+    args = parser.parse_args()
+    info = _run.machine_info("benchmarks/sparse_cholesky.py")
+    print(f"{info['cpu']}, {info['cores']} cores; jax {info['jax']}; commit {info['commit']}\n")
+    methods = ("qdldl", "cholmod simplicial", "cholmod supernodal")
+    print("| dataset | unknowns | nonzeros (upper) | " + " | ".join(methods) + " |")
+    print("|---|--:|--:|" + "--:|" * len(methods))
+    for name in args.datasets:
+        row = measure(name, args.repeats)
+        cells = [f"{row[m][1] * 1e3:.1f} ms ({row[m][0] * 1e3:.0f} first)" for m in methods]
+        print(
+            f"| {name} | {row['unknowns']:,} | {row['nonzeros (upper)']:,} | "
+            + " | ".join(cells)
+            + " |",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
