@@ -1,38 +1,46 @@
-"""Plot jaxlie_geo's speed-up over jaxlie from the raw results of ``benchmarks/run.py``.
+"""The figures of the results page, drawn from raw results: jaxlie_geo's speed-up over
+jaxlie, and pose-graph cost against time beside GTSAM.
 
-One panel per group, with the median speed-up and its inter-quartile range per operation
-and batch size N; float32 is drawn with filled markers, float64 with hollow ones. By
-default it draws the machine that the results page leads with, into ``results.png``
-beside the page (``report.py`` calls it whenever it regenerates the page)::
+A leaf module: ``report.py`` calls it whenever it regenerates the page, and passes the groups,
+operations and labels it uses, so that this module imports nothing of the others. Speed-up:
+one panel per group, with the median speed-up and its inter-quartile range per operation and
+batch size N; float32 is drawn with filled markers, float64 with hollow ones. From the
+command line, through ``report.py``::
 
-    python benchmarks/plot.py                                   # -> benchmarks/results.png
-    python benchmarks/plot.py --out h100.png benchmarks/raw/gpu-nvidia-h100-80gb-hbm3/speed-*.json
+    python benchmarks/report.py                        # the page and its figures
+    python benchmarks/report.py --plot h100.png benchmarks/raw/gpu-*/speed-*.json
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
+from typing import Callable, Sequence
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import report  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
-GROUPS = report.GROUPS
-OPS = report.OPS
 SIZE_COLORS = ("#4c72b0", "#dd8452", "#55a868", "#8172b3")
 SHAPES = ("o", "s", "^", "D")
 
 
-def plot(runs: list, out: Path) -> None:
-    """Draw the speed runs (raw ``speed-*.json`` contents) into the PNG ``out``."""
+def plot(
+    runs: list,
+    out: Path,
+    groups: Sequence[str],
+    ops: Sequence[str],
+    label: Callable[[dict], str],
+    pretty_n: Callable[[int], str],
+) -> None:
+    """Draw the speed runs (raw ``speed-*.json`` contents) into the PNG ``out``: a panel for
+    each of the four ``groups``, the operations ``ops`` along it; ``label`` names a run's
+    machine, ``pretty_n`` a batch size."""
+    GROUPS, OPS = list(groups), list(ops)
     sizes = sorted({r["n"] for run in runs for r in run["results"]})
-    machines = list(dict.fromkeys(report.label(run["machine"]) for run in runs))
+    machines = list(dict.fromkeys(label(run["machine"]) for run in runs))
     fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharey=True)
     slot = 0.8 / max(1, len(sizes))
     for ax, group in zip(axes.flat, GROUPS):
@@ -41,7 +49,7 @@ def plot(runs: list, out: Path) -> None:
         ax.axhline(1.0, color="0.3", lw=1, zorder=1)
         for k, run in enumerate(runs):
             hollow = run["machine"].get("dtype") == "float64"
-            shape = SHAPES[machines.index(report.label(run["machine"])) % len(SHAPES)]
+            shape = SHAPES[machines.index(label(run["machine"])) % len(SHAPES)]
             for r in run["results"]:
                 if r["group"] != group or r["op"] not in OPS:
                     continue
@@ -88,7 +96,7 @@ def plot(runs: list, out: Path) -> None:
             ls="",
             marker="o",
             color=SIZE_COLORS[j % len(SIZE_COLORS)],
-            label=f"N = {report.pretty_n(n)}",
+            label=f"N = {pretty_n(n)}",
         )
         for j, n in enumerate(sizes)
     ]
@@ -127,9 +135,9 @@ def plot(runs: list, out: Path) -> None:
     print(f"wrote {out}")
 
 
-def plot_pose_graphs(data: dict, out: Path) -> None:
+def plot_pose_graphs(data: dict, out: Path, machine: str) -> None:
     """Cost against wall time for GTSAM and ours, one panel per dataset
-    (``raw/<machine>/pose-graphs.json``), into the PNG ``out``."""
+    (``raw/<machine>/pose-graphs.json``), into the PNG ``out``; ``machine`` for the title."""
     res = data["results"]
     fig, axes = plt.subplots(1, len(res), figsize=(3.2 * len(res), 3.2), squeeze=False)
     for ax, r in zip(axes[0], res):
@@ -141,42 +149,7 @@ def plot_pose_graphs(data: dict, out: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("cost")
     axes[0][0].legend(fontsize=8)
-    fig.suptitle(f"Pose graphs, {report.label(data['machine'])}", fontsize=10)
+    fig.suptitle(f"Pose graphs, {machine}", fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=100)
     plt.close(fig)
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "files",
-        nargs="*",
-        type=Path,
-        help="raw speed-*.json files (default: those of the machine the results page leads with)",
-    )
-    ap.add_argument(
-        "--raw-dir",
-        type=Path,
-        default=report.RAW_DIR,
-        help="raw results for the default (default: %(default)s)",
-    )
-    ap.add_argument(
-        "--out",
-        type=Path,
-        default=report.PAGE.parent / report.PLOT_NAME,
-        help="output PNG (default: %(default)s)",
-    )
-    args = ap.parse_args()
-    if args.files:
-        runs = [json.loads(f.read_text(encoding="utf-8")) for f in args.files]
-    else:
-        raw = report.load(args.raw_dir)
-        runs = report.plotted_runs(raw, report.machine_order(raw))
-    if not runs:
-        raise SystemExit("no speed results to plot")
-    plot(runs, args.out)
-
-
-if __name__ == "__main__":
-    main()

@@ -1084,10 +1084,11 @@ def write_page(raw_dir: Path = RAW_DIR, page: Path = PAGE, plot: bool = True) ->
         except ImportError as e:
             print(f"plot not redrawn ({e})", file=sys.stderr)
         else:
-            _plot.plot(runs, page.parent / PLOT_NAME)
+            _plot.plot(runs, page.parent / PLOT_NAME, GROUPS, OPS, label, pretty_n)
             graphs = [raw[m]["pose-graphs"] for m in machine_order(raw) if "pose-graphs" in raw[m]]
             if graphs:
-                _plot.plot_pose_graphs(graphs[0], page.parent / POSE_GRAPH_PLOT)
+                machine = label(graphs[0]["machine"])
+                _plot.plot_pose_graphs(graphs[0], page.parent / POSE_GRAPH_PLOT, machine)
     page.write_text(render(raw, PLOT_NAME), encoding="utf-8")
     print(f"wrote {page}")
 
@@ -1100,11 +1101,28 @@ def main(argv=None) -> int:
     ap.add_argument("--page", type=Path, default=PAGE, help="page to write (default: %(default)s)")
     ap.add_argument("--no-plot", action="store_true", help="leave the plot as it is")
     ap.add_argument(
+        "--plot",
+        type=Path,
+        metavar="PNG",
+        help="draw only the speed-up figure, of the raw speed files given, into PNG",
+    )
+    ap.add_argument("files", nargs="*", type=Path, help="raw speed-*.json files, for --plot")
+    ap.add_argument(
         "--check",
         action="store_true",
         help="write nothing; exit 1 if the page differs from what the raw files render to",
     )
     args = ap.parse_args(argv)
+    if args.plot:
+        import plot as _plot  # benchmarks/plot.py: needs matplotlib
+
+        runs = [json.loads(f.read_text(encoding="utf-8")) for f in args.files]
+        if not runs:
+            raw = load(args.raw_dir)
+            runs = plotted_runs(raw, machine_order(raw))
+        _plot.plot(runs, args.plot, GROUPS, OPS, label, pretty_n)
+        print(f"wrote {args.plot}")
+        return 0
     if args.check:
         text = render(load(args.raw_dir), PLOT_NAME)
         current = args.page.read_text(encoding="utf-8") if args.page.exists() else ""
