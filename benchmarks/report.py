@@ -197,6 +197,14 @@ def _date(info: dict) -> str:
     return info.get("date", "?").split()[0]
 
 
+def _factorisation(info: dict) -> str:
+    """The pose-graph run's sparse factorisation and its package's version."""
+    solver = info.get("linear_solver", "QDLDL")
+    if solver.startswith("CHOLMOD"):
+        return f"CHOLMOD through cvxopt {info.get('cvxopt', '?')}"
+    return f"QDLDL (qdldl {info.get('qdldl', '?')})"
+
+
 def _commit(info: dict) -> str:
     """The commit a run measured, and the files that differed from it if the tree had
     uncommitted changes (``run.py`` records them as ``dirty_files``)."""
@@ -970,11 +978,12 @@ estimate (the file's vertices, or the chained odometry where it has none). Final
 GTSAM's `graph.error` of each side's estimate (our own cost function agrees to rounding).
 GTSAM: `LevenbergMarquardtOptimizer`, default parameters (λI damping, relative and absolute
 tolerances 1e-5, at most 100 iterations), timed `optimize()`. Ours: `pose_graph.solve` with
-its defaults (Levenberg–Marquardt, λI damping, QDLDL sparse LDLᵀ on the host, relative
-tolerance 1e-7, float64), run twice: "first call" includes tracing and compiling, the other
-times are the second call's. "sphere2500, load3D's blocks" swaps the 3 × 3 blocks of every
-information matrix, the reading of GTSAM's own `load3D`, which puts the first block of a
-TORO `EDGE3` matrix on rotation (TORO and HOG-Man put translation first).\
+its defaults (Levenberg–Marquardt, λI damping, a sparse Cholesky on the host, relative
+tolerance 1e-7, float64; the factorisation, CHOLMOD or QDLDL, is named per machine), run
+twice: "first call" includes tracing and compiling, the other times are the second call's.
+"sphere2500, load3D's blocks" swaps the 3 × 3 blocks of every information matrix, the
+reading of GTSAM's own `load3D`, which puts the first block of a TORO `EDGE3` matrix on
+rotation (TORO and HOG-Man put translation first).\
 """
 
 
@@ -1017,8 +1026,8 @@ def pose_graphs_section(raw: dict, order: list) -> list:
         lines += [
             f"### {label(info)}",
             "",
-            f"jax {info.get('jax', '?')}, GTSAM {info.get('gtsam', '?')}, qdldl "
-            f"{info.get('qdldl', '?')}, measured {_date(info)}.",
+            f"jax {info.get('jax', '?')}, GTSAM {info.get('gtsam', '?')}, "
+            f"{_factorisation(info)}, measured {_date(info)}.",
             "",
         ]
         lines += table(header, body, "lrrrrrlrrrr") + [""]
