@@ -1,8 +1,8 @@
 """Pose graphs: g2o and TORO files, and a sparse Gauss–Newton / Levenberg–Marquardt solver.
 
-A pose graph holds poses T_i (SE2 or SE3) and relative-pose measurements Z_ij ≈ T_i⁻¹ T_j
+A pose graph holds poses Tᵢ (SE2 or SE3) and relative-pose measurements Zᵢⱼ ≈ Tᵢ⁻¹ Tⱼ
 with their information matrices; ``solve`` finds the poses that minimise
-½ Σ ρ(‖r_ij‖²_Ω) with r_ij = log(Z_ij⁻¹ T_i⁻¹ T_j). See ``docs/pose-graphs.md``.
+½ Σ ρ(‖rᵢⱼ‖²_Ω) with rᵢⱼ = log(Zᵢⱼ⁻¹ Tᵢ⁻¹ Tⱼ). See ``docs/pose-graphs.md``.
 
     graph = pose_graph.read("w10000.graph")
     solution = pose_graph.solve(graph, progress=True)

@@ -21,8 +21,8 @@ TORO 3D            ``VERTEX3 id x y z roll pitch yaw``
 
 Conventions, common to all four:
 
-- An edge ``(i, j)`` holds Z_ij, the pose of vertex j in the frame of vertex i:
-  Z_ij ≈ T_i⁻¹ T_j, with i and j as written in the file.
+- An edge ``(i, j)`` holds Zᵢⱼ, the pose of vertex j in the frame of vertex i:
+  Zᵢⱼ ≈ Tᵢ⁻¹ Tⱼ, with i and j as written in the file.
 - TORO's angles are ZYX Euler angles: R = Rz(yaw) Ry(pitch) Rx(roll), as
   ``SO3.from_rpy_radians``.
 - Ω is taken as the information of the residual on this library's tangent, translation
@@ -401,7 +401,7 @@ def _chain(
 def read(path: PathLike, *, information_order: Optional[InformationOrder] = None) -> PoseGraph:
     """Read a pose graph from a g2o or TORO file, 2D or 3D, the format told by the tags.
 
-    The records and conventions are those of this module's description: Z_ij is the pose
+    The records and conventions are those of this module's description: Zᵢⱼ is the pose
     of j in the frame of i, TORO's angles are R = Rz(yaw) Ry(pitch) Rx(roll), and the
     information matrix is on the translation-first tangent (g2o's 3D rotation block taken
     as the information of ω, unscaled, as GTSAM does). Numbers are kept exactly as
@@ -413,8 +413,8 @@ def read(path: PathLike, *, information_order: Optional[InformationOrder] = None
     ids that appear only in edges, in the order they appear there; ``graph.edges`` indexes
     that order. Poses without a vertex record (all of them in files of edges only) are
     initialised as GTSAM's loaders do, by composing the edges in file order: for an edge
-    (i, j) whose two poses are unknown, T_i = identity; then T_j = T_i Z_ij if T_j is
-    unknown, or T_i = T_j Z_ij⁻¹ if only T_i is.
+    (i, j) whose two poses are unknown, Tᵢ = identity; then Tⱼ = Tᵢ Zᵢⱼ if Tⱼ is
+    unknown, or Tᵢ = Tⱼ Zᵢⱼ⁻¹ if only Tᵢ is.
     TORO's ``EQUIV`` and g2o's ``FIX`` records are ignored (see the module's description).
 
     Args:

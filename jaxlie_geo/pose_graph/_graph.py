@@ -39,10 +39,10 @@ class PoseGraph:
         ids: ``(N,)`` int64, the vertex ids used in the file, in the order of ``poses``.
         poses: ``(N, 3)`` or ``(N, 7)``, the estimate T_world_i of every vertex.
         edges: ``(E, 2)`` int64, indices ``(i, j)`` into ``poses`` (not ids).
-        measurements: ``(E, 3)`` or ``(E, 7)``, Z_ij, the measured pose of j in the frame
-            of i: Z_ij ≈ T_world_i⁻¹ T_world_j.
+        measurements: ``(E, 3)`` or ``(E, 7)``, Zᵢⱼ, the measured pose of j in the frame
+            of i: Zᵢⱼ ≈ T_world_i⁻¹ T_world_j.
         information: ``(E, k, k)``, symmetric positive definite, on this library's tangent
-            of the residual r_ij = log(Z_ij⁻¹ T_world_i⁻¹ T_world_j): SE2 ``(vx, vy, ω)``,
+            of the residual rᵢⱼ = log(Zᵢⱼ⁻¹ T_world_i⁻¹ T_world_j): SE2 ``(vx, vy, ω)``,
             SE3 ``(vx, vy, vz, ωx, ωy, ωz)`` (translation first), k = 3 or 6.
     """
 

@@ -267,10 +267,10 @@ def solve(
     devices: Optional[Sequence[Any]] = None,
     progress: bool = False,
 ) -> Solution:
-    """Minimise ½ Σ_edges ρ(‖W_ij r_ij‖²) + ½ ‖log(P⁻¹ T_0)/σ‖² over the poses.
+    """Minimise ½ Σ_edges ρ(‖Wᵢⱼ rᵢⱼ‖²) + ½ ‖log(P⁻¹ T₀)/σ‖² over the poses.
 
-    r_ij = log(Z_ij⁻¹ T_i⁻¹ T_j) and W_ij is the upper-triangular square root of the
-    edge's information (W_ijᵀW_ij = Ω_ij); ρ(s) = s without a robust kernel; P is the
+    rᵢⱼ = log(Zᵢⱼ⁻¹ Tᵢ⁻¹ Tⱼ) and Wᵢⱼ is the upper-triangular square root of the
+    edge's information (WᵢⱼᵀWᵢⱼ = Ωᵢⱼ); ρ(s) = s without a robust kernel; P is the
     first pose's initial value. This is the cost GTSAM's ``BetweenFactor`` and
     ``PriorFactor`` define, in this library's tangent order. Computed in float64 whatever
     ``jax_enable_x64`` says.
@@ -447,7 +447,7 @@ def graph_cost(
     graph: PoseGraph, *, robust: Optional[RobustKernel] = None, anchor_sigma: float = 1e-6
 ) -> float:
     """The cost ``solve`` minimises, at ``graph.poses`` (the anchor at the first pose
-    itself, so it adds 0): ½ Σ ρ(‖W_ij r_ij‖²), float64."""
+    itself, so it adds 0): ½ Σ ρ(‖Wᵢⱼ rᵢⱼ‖²), float64."""
     with jax.enable_x64(True):
         p, poses = _problem(graph, anchor_sigma, None)
         return float(_cost_jit(graph.group, robust, poses, p))
