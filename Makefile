@@ -34,8 +34,9 @@ lint: $(VENV)/.installed-test
 # One pytest worker per core (pytest-xdist), at most 8: each is a process with its own jax
 # and compile caches; compilation dominates the suite (tests/README.md). The workers share
 # JAX's persistent compilation cache in out/jax-cache (tests/conftest.py), kept for the next
-# run. From a fresh clone on 2 cores, `make test` took 46 minutes, pytest 45 (10,372
-# programs compiled); the compile budget (tests/_compile_budget.py) fails a run above 12,000.
+# run. From a fresh clone on 2 cores, `make test` takes 41 to 47 minutes, pytest 40 to 46
+# (10,231 programs compiled, 3,100 to 3,750 s of compiling over both workers); the compile
+# budget (tests/_compile_budget.py) fails a run above 12,000.
 test: lint
 	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
