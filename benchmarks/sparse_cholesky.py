@@ -7,7 +7,9 @@ solver's first Levenberg–Marquardt step factorises, λ = 1e-5) is factorised a
 * QDLDL (``qdldl``): the symbolic analysis and first factorisation, then a refactorisation
   of the same pattern (``update``) and solve;
 * CHOLMOD through ``cvxopt``, simplicial and supernodal: ``cholmod.symbolic`` once, then
-  ``cholmod.numeric`` and ``cholmod.solve``.
+  ``cholmod.numeric`` and ``cholmod.solve``;
+
+each through the solver's own ``SparseCholesky``.
 
 Times are the median of ``--repeats`` refactorisations (one thread each, the process
 alone), with the first (analysis included) reported apart. Every solution is checked
@@ -54,61 +56,35 @@ def normal_matrix(name: str):
     return path.pattern, data, path.g
 
 
-def timed(f, repeats: int):
+def timed(solver, data: np.ndarray, g: np.ndarray, repeats: int):
+    """(first solve, analysis included; median of ``repeats`` refactorisations and solves;
+    the solution) of a ``SparseCholesky``."""
+    zero = np.zeros(len(g))
     first = time.perf_counter()
-    out = f(True)
+    out = solver.solve(data, zero, g)
     first = time.perf_counter() - first
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
-        out = f(False)
+        out = solver.solve(data, zero, g)
         times.append(time.perf_counter() - t)
     return first, statistics.median(times), out
 
 
 def measure(name: str, repeats: int) -> dict:
-    import cvxopt
-    import cvxopt.cholmod as cholmod
-    import qdldl
-    import scipy.sparse as sparse
+    from jaxlie_geo.pose_graph._linear import SparseCholesky
 
     pattern, data, g = normal_matrix(name)
-    n = pattern.size
-    matrix = sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(n, n))
-    solver = {}
-
-    def run_qdldl(first: bool):
-        if first:
-            solver["q"] = qdldl.Solver(matrix, upper=True)
-        else:
-            solver["q"].update(matrix, upper=True)
-        return solver["q"].solve(-g)
-
-    row = {"unknowns": n, "nonzeros (upper)": pattern.nnz}
-    row["qdldl"] = timed(run_qdldl, repeats)
-    want = row["qdldl"][2]
-    cols = np.repeat(np.arange(n), np.diff(pattern.indptr))
-    for mode, supernodal in (("cholmod simplicial", 0), ("cholmod supernodal", 2)):
-        A = cvxopt.spmatrix(
-            cvxopt.matrix(data),
-            cvxopt.matrix(pattern.indices.astype(np.int64)),
-            cvxopt.matrix(cols.astype(np.int64)),
-            (n, n),
-        )
-
-        def run_cholmod(first: bool, A=A, supernodal=supernodal):
-            if first:
-                cholmod.options["supernodal"] = supernodal
-                solver["c"] = cholmod.symbolic(A, uplo="U")
-            A.V = cvxopt.matrix(data)
-            cholmod.numeric(A, solver["c"])
-            x = cvxopt.matrix(-g)
-            cholmod.solve(solver["c"], x)
-            return np.asarray(x).ravel()
-
-        row[mode] = timed(run_cholmod, repeats)
-        got = row[mode][2]
-        assert np.allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(want).max()), (name, mode)
+    row = {"unknowns": pattern.size, "nonzeros (upper)": pattern.nnz}
+    methods = {
+        "qdldl": ("qdldl", True),
+        "cholmod simplicial": ("cholmod", False),
+        "cholmod supernodal": ("cholmod", True),
+    }
+    for method, (backend, supernodal) in methods.items():
+        row[method] = timed(SparseCholesky(pattern, backend, supernodal), data, g, repeats)
+        got, want = row[method][2], row["qdldl"][2]
+        assert np.allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(want).max()), (name, method)
     return row
 
 

@@ -7,6 +7,7 @@ a broken link, a page missing from the nav, or a docstring griffe cannot parse f
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import re
@@ -216,11 +217,10 @@ def test_results_page_is_generated_from_the_raw_results() -> None:
 def test_results_page_names_the_files_of_a_modified_tree() -> None:
     """A run measured on a tree with uncommitted changes is shown as such, with the files
     that differed where the run recorded them, never as a bare ``-dirty`` commit."""
-    sys.path.insert(0, str(REPO / "benchmarks"))
-    try:
-        import report
-    finally:
-        sys.path.remove(str(REPO / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("report", REPO / "benchmarks" / "report.py")
+    assert spec is not None and spec.loader is not None
+    report = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(report)
     assert report._commit({"commit": "abc1234"}) == "abc1234"
     assert report._commit({"commit": "abc1234-dirty", "dirty_files": ["a.py", "b.py"]}) == (
         "abc1234 with uncommitted changes (`a.py`, `b.py`)"

@@ -97,6 +97,7 @@ class BlockPattern:
         self.nnz = len(unique)
         self.indices = (unique % size).astype(onp.int64)
         self.indptr = onp.searchsorted(unique // size, onp.arange(size + 1)).astype(onp.int64)
+        self.columns = onp.repeat(onp.arange(size), onp.diff(self.indptr))  # of each nonzero
         self.scatter = inverse[: len(rows)].astype(onp.int64)
         self.diagonal = inverse[len(rows) :].astype(onp.int64)
 
@@ -118,10 +119,11 @@ def installed(backend: str) -> bool:
 
 
 class SparseCholesky:
-    """(H + λD) δ = −g on the host by CHOLMOD (``backend="cholmod"``) or QDLDL
-    (``"qdldl"``); the symbolic analysis is done once, on the first ``solve``."""
+    """(H + λD) δ = −g on the host by CHOLMOD (``backend="cholmod"``, supernodal unless
+    ``supernodal=False``) or QDLDL (``"qdldl"``); the symbolic analysis is done once, on the
+    first ``solve``."""
 
-    def __init__(self, pattern: BlockPattern, backend: str = "qdldl"):
+    def __init__(self, pattern: BlockPattern, backend: str = "qdldl", supernodal: bool = True):
         if backend not in ("cholmod", "qdldl"):
             raise ValueError(
                 f"SparseCholesky: backend must be 'cholmod' or 'qdldl', got {backend!r}"
@@ -135,6 +137,7 @@ class SparseCholesky:
                 f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
             )
         self.backend = backend
+        self.supernodal = supernodal
         self.pattern = pattern
         self._solver: Optional[Any] = None
         self._matrix: Optional[Any] = None
@@ -162,17 +165,16 @@ class SparseCholesky:
         if self._matrix is None:
             # Built once in compressed-column order (sorted, no duplicates), so that its
             # values are ``damped`` in the same order; the symbolic analysis once too.
-            cols = onp.repeat(onp.arange(pat.size), onp.diff(pat.indptr))
             self._matrix = cvxopt.spmatrix(
                 cvxopt.matrix(damped),
                 cvxopt.matrix(pat.indices.astype(onp.int64)),
-                cvxopt.matrix(cols.astype(onp.int64)),
+                cvxopt.matrix(pat.columns.astype(onp.int64)),
                 (pat.size, pat.size),
             )
             if list(self._matrix.I) != pat.indices.tolist():  # pragma: no cover
                 raise AssertionError("cvxopt reordered the compressed-column pattern")
             saved = cholmod.options.get("supernodal")
-            cholmod.options["supernodal"] = 2  # supernodal (2), not simplicial (0) or chosen
+            cholmod.options["supernodal"] = 2 if self.supernodal else 0  # never "choose" (1)
             try:
                 self._solver = cholmod.symbolic(self._matrix, uplo="U")
             finally:  # cvxopt's options are global: leave them as they were
