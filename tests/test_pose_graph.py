@@ -415,6 +415,23 @@ def test_cholesky_falls_back_to_qdldl_without_cvxopt(monkeypatch: pytest.MonkeyP
         solve(graph, linear_solver="cholmod")
 
 
+def test_auto_is_pcg_only_without_a_direct_solver(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``"auto"`` is the factorisation whenever cvxopt or qdldl imports, also where JAX's
+    default device is a GPU (the linearisation stays there, the factorisation runs on the
+    host), and PCG, step for step, only when neither package does."""
+    gpu = type("Device", (), {"platform": "gpu", "device_kind": "a GPU"})()
+    with monkeypatch.context() as patch:
+        patch.setattr(jax, "devices", lambda *backend: [gpu])
+        got = solve(_case(3).graph, tolerance=TIGHT)
+    factorised = _solved(3, linear_solver="cholesky", tolerance=TIGHT)
+    assert got.costs.tolist() == factorised.costs.tolist()
+    want = _solved(3, linear_solver="pcg", tolerance=TIGHT)
+    for module in ("cvxopt", "cvxopt.cholmod", "qdldl"):
+        monkeypatch.setitem(sys.modules, module, None)
+    got = solve(_case(3).graph, tolerance=TIGHT)
+    assert got.costs.tolist() == want.costs.tolist()
+
+
 @over_dims
 def test_solution_record(dim: int) -> None:
     """The record: costs never increase, one per accepted step and one before, the first

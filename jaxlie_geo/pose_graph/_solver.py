@@ -284,7 +284,8 @@ def solve(
             the host: the ``pose-graph`` extra), ``"cholesky"`` (CHOLMOD if installed,
             else QDLDL), ``"pcg"`` (conjugate gradients on the device, block-Jacobi
             preconditioner), or ``"auto"``: ``"cholesky"`` when one of its packages is
-            installed and the poses live on a CPU, PCG otherwise.
+            installed, whatever device holds the poses (the linearisation stays on the
+            device, the factorisation runs on the host), PCG otherwise.
         robust: ``Huber(k)`` or ``Cauchy(k)``, on every edge (not the anchor).
         anchor_sigma: σ of the prior that holds the first pose at its initial value.
         max_iterations: the most accepted steps.
@@ -335,7 +336,9 @@ def solve(
     if onp.any(graph.edges[:, 0] == graph.edges[:, 1]):
         raise ValueError("solve: an edge joins a pose to itself")
     _check_connected(graph)
-    chosen = _default_solver(devices) if linear_solver == "auto" else linear_solver
+    chosen = linear_solver
+    if chosen == "auto":
+        chosen = "cholesky" if installed("cholmod") or installed("qdldl") else "pcg"
     if chosen == "cholesky":
         chosen = "cholmod" if installed("cholmod") else "qdldl"
     with jax.enable_x64(True):
@@ -360,13 +363,6 @@ def _check_connected(graph: PoseGraph) -> None:
             f"solve: the graph has {count} connected components; pose {loose} (id "
             f"{graph.ids[loose]}) is not joined to the first pose by any chain of edges"
         )
-
-
-def _default_solver(devices: Optional[Sequence[Any]]) -> str:
-    platform = (devices[0] if devices else jax.devices()[0]).platform
-    if platform != "cpu" or not (installed("cholmod") or installed("qdldl")):
-        return "pcg"
-    return "cholesky"
 
 
 def _solve(
