@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Callable, TypeVar
 
 _DIR = Path(__file__).resolve().parents[1] / "out" / "test-cache"
-_SHARED = Path(__file__).with_name("_mpref.py")
+_SHARED = Path(__file__).parents[1] / "jaxlie_geo" / "_mpref.py"
 
 F = TypeVar("F", bound=Callable[..., Any])
 

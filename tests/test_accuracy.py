@@ -10,7 +10,7 @@ with 1e-8 ≤ |σ| ≤ 20; σ = 0 or 1e-30 ≤ |σ| ≤ 1e-4 at 0.1 ≤ θ ≤ 3
 for r ∈ {1e-3, 1e-5, 1e-8} and θ/|σ| = ρ from 1e-3 to 1e3 with both signs of σ; and
 3 ≤ |σ| ≤ 20 at 1e-8 ≤ θ ≤ π − 1e-3 (``M._angles_sigmas``).
 
-Measure (tests/_mpref.py has the details and the references): per output block,
+Measure (jaxlie_geo/_mpref.py has the details and the references): per output block,
 ulp_err = ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)), the reference computed in mpmath at 60
 digits from the float the function actually received (subnormals flushed, as XLA on CPU
 does); log's input is a stored group element (the exact exp rounded to the dtype) and its
@@ -28,18 +28,14 @@ for exp and log, also with it on.
 from __future__ import annotations
 
 import functools
-import os
-import sys
 
 import numpy as np
 import pytest
+from _diskcache import disk_cached
+from conftest import SE_GROUPS
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _mpref as M  # noqa: E402
-from _diskcache import disk_cached  # noqa: E402
-from conftest import SE_GROUPS  # noqa: E402
-
-import jaxlie_geo  # noqa: E402
+import jaxlie_geo
+from jaxlie_geo import _mpref as M
 
 N_PER = 64
 

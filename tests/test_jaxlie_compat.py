@@ -17,7 +17,6 @@ import jax_dataclasses as jdc  # a dependency of jaxlie
 import jaxlie as jaxlie_ref  # the test extra installs it; never skipped
 import numpy as np
 import pytest
-from _mpref import x64_for
 from conftest import (
     JAXLIE_GROUPS,
     QUATERNION_GROUPS,
@@ -35,6 +34,7 @@ from conftest import (
 from flax import serialization  # the test extra installs it
 
 import jaxlie_geo
+from jaxlie_geo._mpref import x64_for
 
 REF = {
     jaxlie_geo.SO2: jaxlie_ref.SO2,

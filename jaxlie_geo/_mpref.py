@@ -3,6 +3,7 @@
 Used by tests/test_accuracy.py (assertions on jaxlie_geo) and benchmarks/accuracy.py
 (the same measurement, jaxlie_geo next to jaxlie 1.5). Everything a number in the
 accuracy table depends on lives here, so the test and the table cannot drift apart.
+It needs mpmath (the ``test`` and ``benchmarks`` extras); the library never imports it.
 
 Inputs. For every group, dtype, angle regime and translation size we draw ``n_per``
 tangents with a fixed seed: a random unit direction (SO3/SE3) or a random sign
@@ -73,10 +74,13 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import importlib
 import math
-from typing import Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Sequence, Tuple, Union
 
-import mpmath as mp
+import jax
+import jax.numpy as jnp
+import mpmath as mp  # type: ignore[import-untyped]
 import numpy as np
 
 DPS = 60
@@ -241,7 +245,7 @@ def _series(coef, t2, tol) -> mp.mpf:
         p *= t2
 
 
-_BERN = {}
+_BERN: Dict[int, Any] = {}
 
 
 def _bern_coef(k: int) -> mp.mpf:  # |B_{2k+2}| / (2k+2)!
@@ -365,7 +369,7 @@ def _norm(a):
     return mp.sqrt(mp.fsum(x * x for x in a))
 
 
-def exp_ref(group: str, x: Sequence[float]) -> List[mp.mpf]:
+def exp_ref(group: str, x: Union[Sequence[float], np.ndarray]) -> List[mp.mpf]:
     """Exact group parameters of exp(x) (x: stored floats)."""
     x = _mpf_list(x)
     if group in ("SO2", "SE2"):
@@ -461,7 +465,7 @@ def compose_ref(group: str, pa: Sequence, pb: Sequence, invert_a: bool = False) 
     return q + t
 
 
-def hat(group: str, x: Sequence) -> mp.matrix:
+def hat(group: str, x: Union[Sequence, np.ndarray]) -> mp.matrix:
     """Lie algebra matrix of a tangent (jaxlie ordering: translation first; Sim3
     [[ω̂ + σI, v], [0, 0]], SE23 [[ω̂, ρ, ν], [0, 0, 0], [0, 0, 0]])."""
     x = _mpf_list(x)
@@ -880,14 +884,11 @@ def derivative_errors(got, group, vnorm, order, dtype, with_argmax=False):
 def x64_for(dtype: str):
     """float32 runs with x64 off (what a float32 user has: no silent promotion can hide
     float32 rounding), float64 with x64 on."""
-    import jax
-
     if hasattr(jax, "enable_x64"):  # jax >= 0.7
         ctx = jax.enable_x64(dtype == "float64")
     else:
-        from jax.experimental import disable_x64, enable_x64
-
-        ctx = enable_x64() if dtype == "float64" else disable_x64()
+        experimental: Any = importlib.import_module("jax.experimental")
+        ctx = experimental.enable_x64() if dtype == "float64" else experimental.disable_x64()
     with ctx:
         yield
 
@@ -896,8 +897,6 @@ _FN_CACHE: Dict[Tuple, object] = {}
 
 
 def _functions(lib, group: str, dtype: str):
-    import jax
-
     key = (lib.__name__, group, dtype)
     if key not in _FN_CACHE:
         G = getattr(lib, group)
@@ -914,15 +913,13 @@ def _functions(lib, group: str, dtype: str):
     return _FN_CACHE[key]
 
 
-def evaluate(lib, cases: Cases, ops: Sequence[str] = OPS) -> Dict[str, np.ndarray]:
+def evaluate(lib, cases: Cases, ops: Sequence[str] = OPS) -> Dict[str, Any]:
     """Per-case ulp errors of `lib` (a module with SO2/SE2/SO3/SE3) for each op, NaN
     where an op is not checked in the case's regime; also '<op>_dtype' (the output
     dtype), '<op>_blocks' (exp/log: per-block errors) and '<op>_argmax' (jac/hess: flat
     index of the worst entry)."""
-    import jax.numpy as jnp
-
     g, dt = cases.group, cases.dtype
-    out: Dict[str, np.ndarray] = {}
+    out: Dict[str, Any] = {}
     with x64_for(dt):
         fns = _functions(lib, g, dt)
         for op in ops:
@@ -946,9 +943,9 @@ def evaluate(lib, cases: Cases, ops: Sequence[str] = OPS) -> Dict[str, np.ndarra
                 e, where = derivative_errors(
                     got, g, cases.vnorm[m], 1 if op == "jac" else 2, dt, with_argmax=True
                 )
-                extra = np.zeros(len(m), dtype=np.int64)
-                extra[m] = where
-                out[op + "_argmax"] = extra
+                argmax = np.zeros(len(m), dtype=np.int64)
+                argmax[m] = where
+                out[op + "_argmax"] = argmax
             err[m] = e
             out[op] = err
     return out
