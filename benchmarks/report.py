@@ -36,6 +36,8 @@ import re
 import sys
 from pathlib import Path
 
+from jaxlie_geo._mpref import fmt_ulp
+
 HERE = Path(__file__).resolve().parent
 RAW_DIR = HERE / "raw"
 PAGE = HERE / "RESULTS.md"
@@ -87,19 +89,6 @@ def pretty_n(n: int) -> str:
 def geomean(xs) -> float:
     xs = [x for x in xs if x > 0]
     return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else float("nan")
-
-
-def fmt_ulp(e) -> str:
-    """Worst error in ulp as ``accuracy.py`` prints it."""
-    if e is None or (isinstance(e, float) and math.isnan(e)):
-        return "–"
-    if not math.isfinite(e):
-        return "non-finite"
-    if e < 10:
-        return f"{e:.2f}"
-    if e < 1000:
-        return f"{e:.0f}"
-    return f"{e:.1e}"
 
 
 def table(header, rows, align) -> list:

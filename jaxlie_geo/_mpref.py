@@ -76,7 +76,7 @@ import contextlib
 import dataclasses
 import importlib
 import math
-from typing import Any, Dict, List, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import jax
 import jax.numpy as jnp
@@ -986,7 +986,8 @@ def describe_case(cases: Cases, k: int, op: str) -> str:
     return f"angle≈{cases.angle[k]:.6g}{sg} |v|={cases.size[k]:g} {what}=[{vals}]"
 
 
-def fmt_ulp(e: float) -> str:
+def fmt_ulp(e: Optional[float]) -> str:
+    """An error in ulp as the accuracy tables print it: "–" for none, 3 significant digits."""
     if e is None or (isinstance(e, float) and math.isnan(e)):
         return "–"
     if not math.isfinite(e):
