@@ -420,7 +420,8 @@ def _solve(
         current = system.linearise(poses)
         costs.append(current)
         times.append(time.perf_counter() - start)
-        bar.update(it, current, float(jnp.max(jnp.abs(delta))), lam, times[-1])
+        if bar.enabled:
+            bar.update(it, current, float(jnp.max(jnp.abs(delta))), lam, times[-1])
         if decrease < tolerance:
             reason, converged = "the relative decrease of the cost fell below tolerance", True
             break
