@@ -897,6 +897,80 @@ def _change_table(before: dict, after: dict) -> list:
     return lines + table(header, body, align) + [""]
 
 
+MATRIX_OPS = ("jac_right", "jac_right_inv", "jlog", "adjoint", "grad", "from_matrix")
+MATRIX_GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
+MATRIX_METHOD = """\
+`benchmarks/matrix_ops.py`: every group's Jacobians, `jlog`, adjoint, the gradient of
+‖log(exp(x)⁻¹ b)‖² and `from_matrix` (of matrices with 10⁻³ noise on the rotation block),
+timed beside jaxlie 1.5 where it has the operation and beside the *write floor*, a function
+that writes an array of the output's shape and dtype from one input entry per element (at
+10³ it is mostly the call's dispatch). Time per element, median of 5 rounds in which the
+functions run in turn; ×floor is jaxlie_geo's time over the floor's. In bold: slower than
+jaxlie, or a matrix-valued result over 3x its floor."""
+
+
+def matrix_ops_section(raw: dict, order: list) -> list:
+    found = [raw[m]["matrix-ops"] for m in order if "matrix-ops" in raw[m]]
+    if not found:
+        return []
+    lines = ["## Matrix-valued operations: jaxlie and the write floor", ""]
+    lines += MATRIX_METHOD.splitlines() + [""]
+    for data in found:
+        for dtype in ("float32", "float64"):
+            rows = [r for r in data["results"] if r["dtype"] == dtype]
+            if rows:
+                lines += _matrix_ops_table(data["machine"], dtype, rows)
+    return lines
+
+
+def _matrix_ops_table(info: dict, dtype: str, rows: list) -> list:
+    by = {(r["group"], r["op"], r["n"]): r for r in rows}
+    sizes = sorted({r["n"] for r in rows})
+    header, align = ["group", "op", "output"], "lll"
+    for n in sizes:
+        header += [f"{pretty_n(n)}: jaxlie_geo", f"{pretty_n(n)}: jaxlie", f"{pretty_n(n)}: ×floor"]
+        align += "rrr"
+    header.append(f"compile ms at {pretty_n(sizes[-1])}, jaxlie_geo / jaxlie")
+    align += "r"
+    body = []
+    for g in MATRIX_GROUPS:
+        for o in MATRIX_OPS:
+            if not any((g, o, n) in by for n in sizes):
+                continue
+            first = next(by[g, o, n] for n in sizes if (g, o, n) in by)
+            row = [g, o, "×".join(str(d) for d in first["output_shape"])]
+            for n in sizes:
+                r = by.get((g, o, n))
+                if r is None:
+                    row += ["", "", ""]
+                    continue
+                ours, ref = r["ours_ns_per_elem"], r["jaxlie_ns_per_elem"]
+                over = r["ours_ns_per_elem"] / r["floor_ns_per_elem"]
+                ours_text = fmt_ns(ours)
+                if ref is not None and ours > ref:
+                    ours_text = f"**{ours_text}**"
+                over_text = f"{over:.1f}"
+                if len(r["output_shape"]) == 2 and over > 3:
+                    over_text = f"**{over_text}**"
+                row += [ours_text, fmt_ns(ref) if ref is not None else "–", over_text]
+            r = by.get((g, o, sizes[-1]), first)
+            ref_ms = r["compile_jaxlie_ms"]
+            row.append(
+                f"{r['compile_ours_ms']:.0f} / {ref_ms:.0f}"
+                if ref_ms
+                else f"{r['compile_ours_ms']:.0f} / –"
+            )
+            body.append(row)
+    lines = [
+        f"### {label(info)}, {dtype}",
+        "",
+        f"jax {info.get('jax', '?')}, jaxlie {info.get('jaxlie', '?')}, commit {_commit(info)}, "
+        f"measured {_date(info)}.",
+        "",
+    ]
+    return lines + table(header, body, align) + [""]
+
+
 def _plain_ns(x: float) -> str:
     return f"{x:.0f}" if x >= 100 else f"{x:.1f}" if x >= 10 else f"{x:.2f}"
 
@@ -1054,6 +1128,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += speed_section(raw, order)
     lines += jacobians_section(raw, order)
     lines += extended_section(raw, order)
+    lines += matrix_ops_section(raw, order)
     lines += splines_section(raw, order)
     lines += pose_graphs_section(raw, order)
     lines += change_section(raw, order)
