@@ -266,8 +266,9 @@ class MatrixLieGroup(abc.ABC):
     def jlog(self) -> jax.Array:
         """Jacobian of the log under right perturbations, the inverse right Jacobian at
         ``log()``: ``d/dδ log(T @ exp(δ))`` at δ = 0, shape
-        ``(*batch, tangent_dim, tangent_dim)``."""
-        return type(self).jac_right_inv(self.log())
+        ``(*batch, tangent_dim, tangent_dim)``. (The log is computed into memory first:
+        fused into the Jacobian's entries, XLA:CPU would recompute it for each.)"""
+        return type(self).jac_right_inv(materialize(self.log()))
 
     # -- Jacobians of the exponential (Solà et al. 2018, §IV) ------------------------
 

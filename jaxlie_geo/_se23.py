@@ -15,21 +15,21 @@ import jax
 import jax.numpy as jnp
 from typing_extensions import override
 
-from . import hints
+from . import _scalar, hints
 from ._base import MatrixLieGroup, block_matrix
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
 from ._pytree import pytree_dataclass
-from ._se3 import SE3, exp_translation, log_translation
+from ._scalar import dot, sq_norm
+from ._se3 import SE3, coupled_inverse, coupling_entries, exp_translation, log_translation
 from ._so3 import (
     SO3,
     exp_half_angle,
     exp_quaternion,
-    jac_right_inv_so3,
-    jac_right_so3,
     log_quaternion_parts,
+    rodrigues_entries,
     skew,
 )
-from ._xla import aligned, matmul, matmul_unrolled
+from ._xla import aligned, from_block_entries, materialize_columns, matmul, matmul_unrolled
 
 
 @pytree_dataclass
@@ -232,13 +232,17 @@ class SE23(MatrixLieGroup):
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
         """``(*batch, 9) -> (*batch, 9, 9)``: [[J, Q(ρ), 0], [0, J, 0], [0, Q(ν), J]] with
         J = J_r(ω) of SO(3) and Q SE(3)'s coupling block (Barfoot and Furgale 2014, eq. 102,
-        at −ξ), once per vector."""
+        at −ξ; ``_se3.coupling_entries``), once per vector."""
         xi = cls._check_tangent(tangent, "jac_right")
-        w = xi[..., 3:6]
-        J = jac_right_so3(w)
-        Qp = SE3._q_block(xi[..., :6])
-        Qv = SE3._q_block(jnp.concatenate([xi[..., 6:], w], -1))
-        return block_matrix([[J, Qp, None], [None, J, None], [None, Qv, J]])
+        rho, w, nu = xi[..., :3], xi[..., 3:6], xi[..., 6:]
+        x = sq_norm(w)
+        x, f1, f2, c2, d, dp, dv = materialize_columns(
+            x, _scalar.F1(x), _scalar.F2(x), _scalar.C2(x), _scalar.D(x), dot(w, rho), dot(w, nu)
+        )
+        J = rodrigues_entries(w, 1.0 - f2 * x, -f1, f2)
+        Qp = coupling_entries(rho, w, x, f2, c2, d, dp)
+        Qv = coupling_entries(nu, w, x, f2, c2, d, dv)
+        return from_block_entries([[J, Qp, None], [None, J, None], [None, Qv, J]])
 
     @classmethod
     @override
@@ -246,15 +250,15 @@ class SE23(MatrixLieGroup):
         """``(*batch, 9) -> (*batch, 9, 9)``: the block inverse of ``jac_right`` in closed
         form, [[J⁻¹, −J⁻¹Q(ρ)J⁻¹, 0], [0, J⁻¹, 0], [0, −J⁻¹Q(ν)J⁻¹, J⁻¹]]."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
-        w = xi[..., 3:6]
-        Ji = jac_right_inv_so3(w)
-        Qp = SE3._q_block(xi[..., :6])
-        Qv = SE3._q_block(jnp.concatenate([xi[..., 6:], w], -1))
-
-        def couple(Q: jax.Array) -> jax.Array:
-            return -matmul(matmul(Ji, Q), Ji)
-
-        return block_matrix([[Ji, couple(Qp), None], [None, Ji, None], [None, couple(Qv), Ji]])
+        rho, w, nu = xi[..., :3], xi[..., 3:6], xi[..., 6:]
+        x = sq_norm(w)
+        x, f2, c2, d, g, dp, dv = materialize_columns(
+            x, _scalar.F2(x), _scalar.C2(x), _scalar.D(x), _scalar.G(x), dot(w, rho), dot(w, nu)
+        )
+        Ji = rodrigues_entries(w, 1.0 - x * g, 0.5, g)
+        Cp = coupled_inverse(Ji, coupling_entries(rho, w, x, f2, c2, d, dp))
+        Cv = coupled_inverse(Ji, coupling_entries(nu, w, x, f2, c2, d, dv))
+        return from_block_entries([[Ji, Cp, None], [None, Ji, None], [None, Cv, Ji]])
 
     # -- group operations -----------------------------------------------------------
 

@@ -19,13 +19,18 @@ from ._so3 import (
     cross,
     exp_half_angle,
     exp_quaternion,
-    jac_right_inv_so3,
-    jac_right_so3,
     log_quaternion_parts,
+    rodrigues_entries,
     skew,
-    skew_sq,
 )
-from ._xla import matmul, matmul_unrolled
+from ._xla import (
+    Entries,
+    entries_product,
+    from_block_entries,
+    materialize_columns,
+    matmul,
+    matmul_unrolled,
+)
 
 _FORMS = ("axis_split", "textbook")
 
@@ -121,6 +126,49 @@ def log_translation(
 _KERNEL_FORM = "axis_split"
 
 
+def coupling_entries(
+    rho: jax.Array,
+    phi: jax.Array,
+    x: jax.Array,
+    f2: jax.Array,
+    c2: jax.Array,
+    d: jax.Array,
+    delta: jax.Array,
+) -> Entries:
+    """Q(−ρ, −φ), the coupling block of SE(3)'s J_r (Barfoot and Furgale 2014, eq. 102, at
+    −ξ), entry by entry, from x = θ² = ‖φ‖², F2, C2 and D at x (``_scalar``) and δ = φ·ρ.
+
+    Eq. 102 reads −½ρ̂ + F2 (φ̂ρ̂ + ρ̂φ̂ − φ̂ρ̂φ̂) − C2 (φ̂²ρ̂ + ρ̂φ̂² − 3φ̂ρ̂φ̂) + D (φ̂ρ̂φ̂² + φ̂²ρ̂φ̂).
+    With â b̂ = b aᵀ − (a·b) I and φᵀφ̂ = 0 its products reduce to φ̂ρ̂φ̂ = −δ φ̂,
+    φ̂²ρ̂ + ρ̂φ̂² − 3φ̂ρ̂φ̂ = 2δ φ̂ − θ² ρ̂ and φ̂ρ̂φ̂² + φ̂²ρ̂φ̂ = −2δ φ̂², so that
+
+        Q = (C2 θ² − ½) ρ̂ + (F2 − 2 C2) δ φ̂ + F2 (ρφᵀ + φρᵀ) − 2 D δ φφᵀ + 2 δ (D θ² − F2) I,
+
+    with no matrix product (each coefficient is bounded, so nothing cancels)."""
+    k_rho = c2 * x - 0.5
+    k_phi = (f2 - 2.0 * c2) * delta
+    k_eye = 2.0 * delta * (d * x - f2)
+    k_pp = -2.0 * d * delta
+    r = [rho[..., i] for i in range(3)]
+    p = [phi[..., i] for i in range(3)]
+    s = [k_rho * r[i] + k_phi * p[i] for i in range(3)]  # Q's skew part is ŝ
+
+    def sym(i: int, j: int) -> jax.Array:
+        return f2 * (r[i] * p[j] + p[i] * r[j]) + k_pp * p[i] * p[j]
+
+    return [
+        [sym(0, 0) + k_eye, sym(0, 1) - s[2], sym(0, 2) + s[1]],
+        [sym(1, 0) + s[2], sym(1, 1) + k_eye, sym(1, 2) - s[0]],
+        [sym(2, 0) - s[1], sym(2, 1) + s[0], sym(2, 2) + k_eye],
+    ]
+
+
+def coupled_inverse(j_inv: Entries, q: Entries) -> Entries:
+    """−J⁻¹ Q J⁻¹, the coupling block of an inverse Jacobian [[J, Q], [0, J]]⁻¹."""
+    t = entries_product(entries_product(j_inv, q), j_inv)
+    return [[-e for e in row] for row in t]
+
+
 @pytree_dataclass
 class SE3(SEBase[SO3]):
     """Special Euclidean group of 3D rigid transforms ``x ↦ R x + t``.
@@ -205,26 +253,6 @@ class SE3(SEBase[SO3]):
         )
 
     @staticmethod
-    def _q_block(xi: jax.Array) -> jax.Array:
-        """Q(−ρ, −φ), the coupling block of J_r (Barfoot & Furgale 2014, eq. 102, at −ξ):
-        −½ρ̂ + F2 (φ̂ρ̂ + ρ̂φ̂ − φ̂ρ̂φ̂) − C2 (φ̂²ρ̂ + ρ̂φ̂² − 3φ̂ρ̂φ̂) + D (φ̂ρ̂φ̂² + φ̂²ρ̂φ̂)."""
-        rho, phi = xi[..., :3], xi[..., 3:]
-        x = sq_norm(phi)
-        P, Rh = skew(phi), skew(rho)
-        PR, RP = matmul(P, Rh), matmul(Rh, P)
-        PRP = matmul(PR, P)
-        PP = skew_sq(phi)
-        a = _scalar.F2(x)[..., None, None]
-        b = _scalar.C2(x)[..., None, None]
-        c = _scalar.D(x)[..., None, None]
-        return (
-            -0.5 * Rh
-            + a * (PR + RP - PRP)
-            - b * (matmul(PP, Rh) + matmul(Rh, PP) - 3.0 * PRP)
-            + c * (matmul(PRP, P) + matmul(P, PRP))
-        )
-
-    @staticmethod
     def _blocks(top_left: jax.Array, top_right: jax.Array) -> jax.Array:
         zero = jnp.zeros_like(top_left)
         return jnp.concatenate(
@@ -239,19 +267,33 @@ class SE3(SEBase[SO3]):
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
         """``(*batch, 6) -> (*batch, 6, 6)``: J_r(ξ) = J_l(−ξ) = [[J_r(φ), Q(−ρ, −φ)],
-        [0, J_r(φ)]] for ξ = (ρ, φ)."""
+        [0, J_r(φ)]] for ξ = (ρ, φ), J_r(φ) = (1 − F2 θ²) I − F1 φ̂ + F2 φφᵀ
+        (``coupling_entries`` for Q)."""
         xi = cls._check_tangent(tangent, "jac_right")
-        return cls._blocks(jac_right_so3(xi[..., 3:]), cls._q_block(xi))
+        rho, phi = xi[..., :3], xi[..., 3:]
+        x = sq_norm(phi)
+        x, f1, f2, c2, d, delta = materialize_columns(
+            x, _scalar.F1(x), _scalar.F2(x), _scalar.C2(x), _scalar.D(x), dot(phi, rho)
+        )
+        J = rodrigues_entries(phi, 1.0 - f2 * x, -f1, f2)
+        return from_block_entries([[J, coupling_entries(rho, phi, x, f2, c2, d, delta)], [None, J]])
 
     @classmethod
     @override
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
         """``(*batch, 6) -> (*batch, 6, 6)``: J_r⁻¹(ξ) = [[J⁻¹, −J⁻¹ Q J⁻¹], [0, J⁻¹]],
-        J⁻¹ = J_r⁻¹(φ) of SO(3), Q = Q(−ρ, −φ) (block inverse of ``jac_right``, in closed
-        form)."""
+        J⁻¹ = J_r⁻¹(φ) = (1 − G θ²) I + ½ φ̂ + G φφᵀ of SO(3), Q = Q(−ρ, −φ) (the block
+        inverse of ``jac_right``, in closed form)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
-        Jinv, Q = jac_right_inv_so3(xi[..., 3:]), cls._q_block(xi)
-        return cls._blocks(Jinv, -matmul(matmul(Jinv, Q), Jinv))
+        rho, phi = xi[..., :3], xi[..., 3:]
+        x = sq_norm(phi)
+        x, f2, c2, d, g, delta = materialize_columns(
+            x, _scalar.F2(x), _scalar.C2(x), _scalar.D(x), _scalar.G(x), dot(phi, rho)
+        )
+        Ji = rodrigues_entries(phi, 1.0 - x * g, 0.5, g)
+        return from_block_entries(
+            [[Ji, coupled_inverse(Ji, coupling_entries(rho, phi, x, f2, c2, d, delta))], [None, Ji]]
+        )
 
     @classmethod
     @override

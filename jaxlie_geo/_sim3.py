@@ -30,7 +30,7 @@ from ._so3 import (
     log_quaternion_parts,
     skew,
 )
-from ._xla import aligned, matmul
+from ._xla import aligned, materialize_columns, matmul
 
 
 def _eye3(like: jax.Array) -> jax.Array:
@@ -278,8 +278,11 @@ class Sim3(MatrixLieGroup):
         2 C_x = 2T_{0,4} − T_{1,3}."""
         v, w, sigma = xi[..., :3], xi[..., 3:6], xi[..., 6]
         x = sq_norm(w)
-        a, d0, b, c, _, d1_0, d1_1, d1_2, d0_3, d1_3, d0_4 = _scalar.sim3_family(
-            sigma, x, _scalar.COEFFICIENTS_AND_DERIVATIVES
+        q = exp_quaternion(w)
+        # Computed once into one array: fused, each is recomputed per entry that reads it.
+        a, d0, b, c, _, d1_0, d1_1, d1_2, d0_3, d1_3, d0_4, q0, q1, q2, q3 = materialize_columns(
+            *_scalar.sim3_family(sigma, x, _scalar.COEFFICIENTS_AND_DERIVATIVES),
+            *(q[..., i] for i in range(4)),
         )
         coeffs = (a, d0, b, c)
         d1_0, d1_1, d1_2, d0_3, d1_3, d0_4 = (
@@ -296,7 +299,7 @@ class Sim3(MatrixLieGroup):
             + cm * (w[..., :, None] * v[..., None, :] + wv[..., None] * _eye3(xi))
         )
         M = jnp.concatenate([_w_matrix(coeffs, w), dt_dw, dt_dsigma[..., None]], axis=-1)
-        return SO3(exp_quaternion(w)).as_matrix(), coeffs, M
+        return SO3(jnp.stack([q0, q1, q2, q3], -1)).as_matrix(), coeffs, M
 
     @classmethod
     @override

@@ -15,7 +15,7 @@ from ._checks import as_float_array, resolve_dtype
 from ._projection import nearest_quaternion
 from ._pytree import pytree_dataclass
 from ._scalar import sq_norm
-from ._xla import constant
+from ._xla import Entries, constant, from_entries
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -176,6 +176,19 @@ def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
     return eye + 0.5 * skew(omega) + _scalar.G(sq_norm(omega))[..., None, None] * skew_sq(omega)
 
 
+def rodrigues_entries(w: jax.Array, a: jax.Array, b: Any, c: jax.Array) -> Entries:
+    """The entries of a I + b ŵ + c w wᵀ for ``w`` ``(*batch, 3)`` and coefficients
+    ``(*batch,)`` (``b`` may be a number): the form of every SO(3) Jacobian."""
+    w0, w1, w2 = w[..., 0], w[..., 1], w[..., 2]
+    cw0, cw1, cw2 = c * w0, c * w1, c * w2
+    bw0, bw1, bw2 = b * w0, b * w1, b * w2
+    return [
+        [a + cw0 * w0, cw0 * w1 - bw2, cw0 * w2 + bw1],
+        [cw1 * w0 + bw2, a + cw1 * w1, cw1 * w2 - bw0],
+        [cw2 * w0 - bw1, cw2 * w1 + bw0, a + cw2 * w2],
+    ]
+
+
 def jlog_so3(omega: jax.Array) -> jax.Array:
     """J_r⁻¹(ω) for a principal ω (θ ≤ π, a log's output): ``(*batch, 3) -> (*batch, 3, 3)``.
 
@@ -185,16 +198,7 @@ def jlog_so3(omega: jax.Array) -> jax.Array:
     against ``jax.jacfwd``: ``benchmarks/jacobians.py``."""
     x = sq_norm(omega)
     g = _scalar.G_principal(x)
-    h = 1.0 - x * g
-    w0, w1, w2 = omega[..., 0], omega[..., 1], omega[..., 2]
-    gw0, gw1, gw2 = g * w0, g * w1, g * w2
-    hw0, hw1, hw2 = 0.5 * w0, 0.5 * w1, 0.5 * w2
-    rows = [
-        [h + gw0 * w0, gw0 * w1 - hw2, gw0 * w2 + hw1],
-        [gw1 * w0 + hw2, h + gw1 * w1, gw1 * w2 - hw0],
-        [gw2 * w0 - hw1, gw2 * w1 + hw0, h + gw2 * w2],
-    ]
-    return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
+    return from_entries(rodrigues_entries(omega, 1.0 - x * g, 0.5, g))
 
 
 @pytree_dataclass

@@ -11,7 +11,7 @@ A leaf module: it knows a group element by its interface (``_checks.is_element``
 from __future__ import annotations
 
 import re
-from typing import Any, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import jax
 import jax.numpy as jnp
@@ -81,6 +81,50 @@ def materialize(*xs: Any) -> Any:
     """
     out = _barrier(xs) if TANGENTS_PASS_THROUGH else jax.lax.optimization_barrier(xs)
     return out[0] if len(xs) == 1 else out
+
+
+def materialize_columns(*xs: jax.Array) -> List[jax.Array]:
+    """The ``(*batch,)`` arrays ``xs``, computed once into one ``(*batch, len(xs))`` array
+    before the kernel that reads them, and returned as its columns.
+
+    For the per-element coefficients of a matrix written entry by entry (a Jacobian's F1,
+    F2, ...): XLA:CPU fuses them into the loop that writes the stacked matrix, which
+    evaluates every entry on its own and so recomputes each coefficient once per entry
+    that reads it. Behind ``materialize`` as separate arrays they stay fused; stacked
+    into one array they are computed once (SE(3)'s J_r: 431 → 172 ns per element in
+    float32, ``docs/design/memory-and-chunks.md``)."""
+    stacked = materialize(jnp.stack(xs, axis=-1))
+    return [stacked[..., i] for i in range(len(xs))]
+
+
+Entries = List[List[jax.Array]]
+"""A small matrix as its rows of entries, each ``(*batch,)``."""
+
+
+def from_entries(rows: Sequence[Sequence[jax.Array]]) -> jax.Array:
+    """The ``(*batch, m, n)`` matrix of ``m`` rows of ``n`` entries of shape ``(*batch,)``."""
+    return jnp.stack([jnp.stack(list(row), axis=-1) for row in rows], axis=-2)
+
+
+def from_block_entries(blocks: Sequence[Sequence[Optional[Entries]]]) -> jax.Array:
+    """The matrix of 3 × 3 blocks given by their entries, ``None`` for a zero block:
+    ``(*batch, 3 r, 3 c)`` for ``r`` rows of ``c`` blocks."""
+    some = next(b for row in blocks for b in row if b is not None)
+    zero = jnp.zeros_like(some[0][0])
+    rows = []
+    for block_row in blocks:
+        for i in range(3):
+            rows.append([e for b in block_row for e in (b[i] if b is not None else [zero] * 3)])
+    return from_entries(rows)
+
+
+def entries_product(a: Entries, b: Entries) -> Entries:
+    """The entries of A B for 3 × 3 matrices given by their entries (multiply-adds in
+    the order of the sum over k)."""
+    return [
+        [a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j] for j in range(3)]
+        for i in range(3)
+    ]
 
 
 def constant(values: Any, like: jax.Array) -> jax.Array:
