@@ -34,9 +34,10 @@ lint: $(VENV)/.installed-test
 # One pytest worker per core (pytest-xdist), at most 8: each is a process with its own jax
 # and compile caches; compilation dominates the suite (tests/README.md). The workers share
 # JAX's persistent compilation cache in out/jax-cache (tests/conftest.py), kept for the next
-# run. From a fresh clone on 2 cores, `make test` takes 41 to 47 minutes, pytest 40 to 46
-# (10,231 programs compiled, 3,100 to 3,750 s of compiling over both workers); the compile
-# budget (tests/_compile_budget.py) fails a run above 12,000.
+# run. From a fresh clone on 2 cores, `make test` takes 37 to 52 minutes, pytest 36 to 50
+# (about 10,100 programs compiled, 2,900 to 4,000 s of compiling over both workers; the
+# same programs compile up to 1.4x slower from one run to the next on a shared machine);
+# the compile budget (tests/_compile_budget.py) fails a run above 12,000.
 test: lint
 	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
