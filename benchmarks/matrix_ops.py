@@ -69,7 +69,7 @@ def make_op(lib, group: str, op: str):
 
 def make_inputs(group: str, op: str, n: int, dtype, seed: int) -> tuple:
     """The inputs of ``op``, identical for both libraries."""
-    G = jaxlie_geo.__dict__[group]
+    G = getattr(jaxlie_geo, group)
     rng = np.random.default_rng([seed, GROUPS.index(group), OPS.index(op), n])
     tangent = lambda: jnp.asarray(0.8 * rng.normal(size=(n, G.tangent_dim)), dtype)  # noqa: E731
     params = jax.jit(lambda x: G.exp(x).parameters())
