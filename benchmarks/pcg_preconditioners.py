@@ -86,7 +86,7 @@ def timed(run):
 
 
 def measure(name: str, damping: float):
-    from jaxlie_geo.pose_graph._linear import SparseCholesky
+    from jaxlie_geo._sparse import SparseCholesky
 
     pattern, data, g = _sc.normal_matrix(name)  # data: H + 1e-5·I
     g, n = np.asarray(g).ravel(), pattern.size

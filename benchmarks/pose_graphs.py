@@ -96,7 +96,7 @@ def to_gtsam(graph: pose_graph.PoseGraph):
 
 def _linear_solver() -> str:
     """The factorisation ``solve``'s default takes on this machine."""
-    from jaxlie_geo.pose_graph._linear import installed
+    from jaxlie_geo._sparse import installed
 
     return "CHOLMOD (cvxopt)" if installed("cholmod") else "QDLDL"
 

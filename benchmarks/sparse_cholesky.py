@@ -49,9 +49,13 @@ def normal_matrix(name: str):
     graph = pose_graph.read(gtsam.findExampleDataFile(file), **options)
     with jax.enable_x64(True):
         p, poses = _solver._problem(graph, 1e-6, None)
-        path = _solver._CholeskyPath(graph.group, None, graph, p, False, "qdldl")
+        edges = np.stack([np.asarray(p.edge_i), np.asarray(p.edge_j)], -1)
+        path = _solver.lsq.system(
+            _solver._GraphModel(graph.group, None), p, [edges, np.zeros((1, 1))],
+            graph.num_poses, 3 if graph.dim == 2 else 6, "qdldl",
+        )  # fmt: skip
         path.linearise(poses)
-    data = path.data.copy()
+    data = path.values.copy()
     data[path.pattern.diagonal] += 1e-5
     return path.pattern, data, path.g
 
@@ -72,7 +76,7 @@ def timed(solver, data: np.ndarray, g: np.ndarray, repeats: int):
 
 
 def measure(name: str, repeats: int) -> dict:
-    from jaxlie_geo.pose_graph._linear import SparseCholesky
+    from jaxlie_geo._sparse import SparseCholesky
 
     pattern, data, g = normal_matrix(name)
     row = {"unknowns": pattern.size, "nonzeros (upper)": pattern.nnz}

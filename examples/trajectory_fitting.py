@@ -359,7 +359,7 @@ def fit_spline(
         dt=dt,
         degree=3,
         weights=onp.tile(W_DATA, (idx.size, 1)),  # (N, 6): the same W for every report
-        iterations=100,
+        max_iterations=100,
         # float32: a relative decrease of 10⁻⁶ is a few roundings of the cost, the most a
         # step can still be trusted to give.
         tolerance=1e-6,

@@ -16,7 +16,10 @@ import jaxlie_geo
 
 PACKAGE = pathlib.Path(jaxlie_geo.__file__).parent
 
-LEAVES = {"hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_projection"}
+LEAVES = {
+    "hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_projection", "_sparse",
+    "_least_squares",
+}  # fmt: skip
 """Modules with no knowledge of the group classes: the base imports them, never the reverse."""
 
 

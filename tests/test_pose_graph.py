@@ -369,20 +369,24 @@ def test_gauss_newton_and_levenberg_marquardt_with_cholesky_and_pcg_agree(dim: i
 
 
 @pytest.mark.parametrize(
-    ("backend", "supernodal"), [("cholmod", True), ("cholmod", False), ("qdldl", True)]
+    ("backend", "supernodal"),
+    [("cholmod", True), ("cholmod", False), ("qdldl", True), ("banded", True), ("dense", True)],
 )
 def test_sparse_cholesky_solves_each_damping_against_numpy(backend: str, supernodal: bool) -> None:
     """The host factorisations, refactorised at several dampings of one pattern (as a
     Levenberg–Marquardt loop does), each solve (H + λD) δ = −g to rounding against
-    ``numpy.linalg.solve`` of the dense matrix."""
-    from jaxlie_geo.pose_graph._linear import BlockPattern, SparseCholesky
+    ``numpy.linalg.solve`` of the dense matrix; the pattern holds factors on two variables
+    and, repeated, on three."""
+    from jaxlie_geo._sparse import BandedCholesky, BlockPattern, SparseCholesky
 
     rng = np.random.default_rng(3)
     n, k = 12, 6
     edge_i = np.concatenate([np.arange(n - 1), rng.integers(0, n, 8)])
     edge_j = np.concatenate([np.arange(1, n), rng.integers(0, n, 8)])
     keep = edge_i != edge_j
-    pattern = BlockPattern(edge_i[keep], edge_j[keep], n, k)
+    triples = np.array([[2, 3, 4], [2, 3, 4], [7, 8, 9]])
+    pattern = BlockPattern([np.stack([edge_i[keep], edge_j[keep]], -1), triples], n, k)
+    assert pattern.segment_counts[1] == 2 and pattern.segment_ids[1].tolist() == [0, 0, 1]
     size = pattern.size
     # A positive definite matrix on the pattern: its upper triangle, as the solver stores it.
     dense = np.zeros((size, size))
@@ -391,13 +395,23 @@ def test_sparse_cholesky_solves_each_damping_against_numpy(backend: str, superno
     dense[rows, cols] = rng.normal(size=pattern.nnz)
     dense = dense + dense.T + 4.0 * size * np.eye(size)
     data = dense[rows, cols]
-    solver = SparseCholesky(pattern, backend, supernodal)
+    if backend in ("banded", "dense"):
+        solver = BandedCholesky(pattern, dense=backend == "dense")
+    else:
+        solver = SparseCholesky(pattern, backend, supernodal)
     g = rng.normal(size=size)
     for lam in (0.0, 1e-3, 10.0, 0.0):
         damping = lam * np.abs(np.diagonal(dense))
         got = solver.solve(data, damping, g)
         want = np.linalg.solve(dense + np.diag(damping), -g)
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14, err_msg=f"λ = {lam}")
+    # −H is not positive definite: a Cholesky factorisation refuses it (NaN, so that the
+    # loop raises λ), an LDLᵀ one (QDLDL, simplicial CHOLMOD) solves it.
+    got = solver.solve(-data, 0.0 * damping, g)
+    if backend in ("banded", "dense") or (backend == "cholmod" and supernodal):
+        assert np.isnan(got).all()
+    else:
+        np.testing.assert_allclose(got, np.linalg.solve(-dense, -g), rtol=1e-12, atol=1e-14)
 
 
 def test_cholesky_falls_back_to_qdldl_without_cvxopt(monkeypatch: pytest.MonkeyPatch) -> None:

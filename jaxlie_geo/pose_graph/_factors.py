@@ -32,6 +32,7 @@ import jax.numpy as jnp
 from .. import manifold
 from .._se2 import SE2
 from .._se3 import SE3
+from .._sparse import Factors
 from .._xla import matmul
 
 Group = Union[SE2, SE3]
@@ -94,17 +95,6 @@ class Problem(NamedTuple):
     anchor_weight: jax.Array  # () 1/σ
 
 
-class Linearisation(NamedTuple):
-    """Whitened, reweighted residuals and Jacobian blocks, and the cost (a pytree)."""
-
-    cost: jax.Array  # ()
-    e: jax.Array  # (E, k)
-    A_i: jax.Array  # (E, k, k)
-    A_j: jax.Array  # (E, k, k)
-    e_0: jax.Array  # (k,) the anchor
-    A_0: jax.Array  # (k, k)
-
-
 def tr(A: jax.Array) -> jax.Array:
     """Aᵀ over the last two axes."""
     return jnp.swapaxes(A, -1, -2)
@@ -140,8 +130,9 @@ def cost(G: Type[Group], poses: jax.Array, p: Problem, robust: Optional[RobustKe
 
 def linearise(
     G: Type[Group], poses: jax.Array, p: Problem, robust: Optional[RobustKernel]
-) -> Linearisation:
-    """The cost, and the whitened (and reweighted) residuals and Jacobian blocks."""
+) -> tuple[jax.Array, tuple[Factors, Factors]]:
+    """The cost, and the whitened (and reweighted) residuals and Jacobian blocks: the edges
+    as factors on (i, j), the anchor as one on pose 0."""
     T_i, T_j, Z = _edges(G, poses, p)
     E = Z._between(T_i._between(T_j))
     r = E.log()
@@ -151,14 +142,15 @@ def linearise(
     e = mv(W, r)
     edge_costs, weight = _costs(e, robust)
     scale = jnp.sqrt(weight)[:, None]
-    A_i = matmul(W, J_i) * scale[..., None]
-    A_j = matmul(W, J_j) * scale[..., None]
+    A = matmul(W[:, None], jnp.stack([J_i, J_j], axis=1)) * scale[..., None, None]
     anchor: Any = G(p.anchor)
     E_0 = anchor._between(G(poses[0]))
     e_0 = E_0.log() * p.anchor_weight
     A_0 = E_0.jlog() * p.anchor_weight
     total = jnp.sum(edge_costs) + 0.5 * jnp.sum(e_0 * e_0)
-    return Linearisation(total, e * scale, A_i, A_j, e_0, A_0)
+    edges = Factors(jnp.stack([p.edge_i, p.edge_j], axis=-1), e * scale, A)
+    first = Factors(jnp.zeros((1, 1), p.edge_i.dtype), e_0[None], A_0[None, None])
+    return total, (edges, first)
 
 
 def retract(G: Type[Group], poses: jax.Array, delta: jax.Array) -> jax.Array:

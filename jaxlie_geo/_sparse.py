@@ -1,0 +1,329 @@
+"""Block-sparse normal equations (H + λD) δ = −g of a least-squares problem, and their
+solvers.
+
+The residuals come in *factors*: factor f depends on m variables ``index[f]`` (distinct),
+has a whitened residual e_f ``(r,)`` and Jacobian blocks A_f,a = ∂e_f/∂δ_index[f,a]
+``(r, k)``, k the tangent dimension of every variable. Then H = Σ_f A_fᵀ A_f has a k × k
+block at (u, v) for every pair of variables that share a factor, and g = Σ_f A_fᵀ e_f.
+A pose graph's edges are factors on two poses and its anchor one on the first; a spline's
+samples are factors on the ``degree + 1`` control points that shape them.
+
+Four ways to solve, all but the last on the host:
+
+- **Sparse Cholesky.** The per-factor blocks are summed into the upper triangle of H in
+  compressed-column form, through a scatter map built once per problem (its pattern never
+  changes), and factorised with a symbolic analysis once and a numeric factorisation at
+  every damping a Levenberg–Marquardt loop tries, by one of two packages:
+
+  * CHOLMOD (Chen, Davis, Hager and Rajamanickam, *Algorithm 887: CHOLMOD, supernodal
+    sparse Cholesky factorization and update/downdate*, ACM TOMS 35(3), 2008) through
+    ``cvxopt`` (``cvxopt.cholmod``), supernodal. cvxopt is GPL-3 licensed, as CHOLMOD's
+    supernodal module is: an optional extra (``jaxlie_geo[cholmod]``), never a dependency.
+  * QDLDL (Stellato, Banjac, Goulart, Bemporad and Boyd, *OSQP: an operator splitting
+    solver for quadratic programs*, 2020, §5.1), the square-root-free LDLᵀ with an
+    approximate-minimum-degree ordering, Apache-2.0 (``jaxlie_geo[pose-graph]``). Its
+    supernodes are single columns, so the blocks of a 3D graph factorise several times
+    slower (``docs/design/pose-graph-solver.md``).
+- **Banded Cholesky**: LAPACK's ``pbtrf`` through SciPy (installed with JAX), on H stored by
+  diagonals; O(size · bandwidth²) time and O(size · bandwidth) memory. Right when the
+  variables' order keeps H narrow, as a spline's does (bandwidth (degree + 1)·k).
+- **Dense Cholesky**: LAPACK's ``potrf`` on all of H, O(size³): for small problems.
+- **Preconditioned conjugate gradients** (``jax.scipy.sparse.linalg.cg``) on any device,
+  matrix-free: H x = Σ_f A_fᵀ(A_f x), which shards across devices with the factors. The
+  preconditioner is block Jacobi: the inverse of H's k × k diagonal blocks.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, NamedTuple, Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as onp
+
+from ._xla import matmul
+
+#: Damping D = diag(H), clipped below to this so that a direction the data do not
+#: constrain is still damped (as in Ceres Solver's Levenberg–Marquardt strategy).
+DAMPING_FLOOR = 1e-6
+
+
+class Factors(NamedTuple):
+    """F factors of m variables each (a pytree).
+
+    Attributes:
+        variables: ``(F, m)`` int32, the variables of each factor, distinct within a factor.
+        e: ``(F, r)``, the whitened residuals.
+        A: ``(F, m, r, k)``, the whitened Jacobian blocks, A[f, a] = ∂e_f/∂δ_variables[f, a].
+    """
+
+    variables: jax.Array
+    e: jax.Array
+    A: jax.Array
+
+
+def _flat(A: jax.Array) -> jax.Array:
+    """The blocks of each factor side by side, ``(F, r, m·k)``."""
+    F, m, r, k = A.shape
+    return jnp.moveaxis(A, 1, 2).reshape(F, r, m * k)
+
+
+def _scatter(values: jax.Array, index: jax.Array, n: int) -> jax.Array:
+    """Σ over factors and their variables of ``values`` ``(F, m, ...)`` at ``index``:
+    ``(n, ...)``."""
+    return jax.ops.segment_sum(values.reshape((-1,) + values.shape[2:]), index.ravel(), n)
+
+
+def _sum(parts: Sequence[jax.Array]) -> jax.Array:
+    out = parts[0]
+    for part in parts[1:]:
+        out = out + part
+    return out
+
+
+def gradient(factors: Sequence[Factors], n: int) -> jax.Array:
+    """g = Σ_f A_fᵀ e_f, ``(n, k)``."""
+    parts = []
+    for fs in factors:
+        F, m, r, k = fs.A.shape
+        Ate = matmul(jnp.swapaxes(_flat(fs.A), -1, -2), fs.e[..., None])[..., 0]
+        parts.append(_scatter(Ate.reshape(F, m, k), fs.variables, n))
+    return _sum(parts)
+
+
+def diagonal_blocks(factors: Sequence[Factors], n: int) -> jax.Array:
+    """H's diagonal blocks Σ_f A_f,aᵀ A_f,a, ``(n, k, k)``."""
+    blocks = [(matmul(jnp.swapaxes(fs.A, -1, -2), fs.A), fs.variables) for fs in factors]
+    return _sum([_scatter(AtA, variables, n) for AtA, variables in blocks])
+
+
+def hessian_values(
+    factors: Sequence[Factors],
+    segment_ids: Sequence[Optional[jax.Array]],
+    segment_counts: Sequence[int],
+) -> jax.Array:
+    """Every factor's contribution to H in the order ``BlockPattern`` expects: per factor
+    the upper triangle of A_fᵀ A_f ``(m·k, m·k)`` in row-major order. Where a factor set's
+    variable tuples repeat (``segment_ids[s]`` not ``None``: the id of each factor's tuple,
+    ``segment_counts[s]`` of them), the factors of one tuple are summed first. Flat."""
+    out = []
+    for fs, ids, count in zip(factors, segment_ids, segment_counts):
+        M = _flat(fs.A)
+        iu = onp.triu_indices(M.shape[-1])
+        values = matmul(jnp.swapaxes(M, -1, -2), M)[:, iu[0], iu[1]]
+        if ids is not None:
+            values = jax.ops.segment_sum(values, ids, count)
+        out.append(values.ravel())
+    return jnp.concatenate(out)
+
+
+def matvec(factors: Sequence[Factors], x: jax.Array) -> jax.Array:
+    """H x = Σ_f A_fᵀ (A_f x_f) for x ``(n, k)``."""
+    parts = []
+    for fs in factors:
+        F, m, r, k = fs.A.shape
+        M = _flat(fs.A)
+        u = matmul(M, x[fs.variables].reshape(F, m * k, 1))
+        Mtu = matmul(jnp.swapaxes(M, -1, -2), u).reshape(F, m, k)
+        parts.append(_scatter(Mtu, fs.variables, x.shape[0]))
+    return _sum(parts)
+
+
+class BlockPattern:
+    """The upper triangle of H in compressed-column form, and the map that sums the values
+    of ``hessian_values`` into it (one ``numpy.bincount``), built once per problem.
+
+    Arguments:
+        indices: per factor set, the host array ``(F, m)`` of its factors' variables.
+        num_variables: n; H is ``(n·k, n·k)``.
+        k: the tangent dimension.
+
+    Attributes:
+        size, nnz: n·k and the number of stored (upper-triangle) entries.
+        indices, indptr, columns: the compressed-column pattern (row of every entry, start
+            of every column, column of every entry).
+        scatter, diagonal: where each value of ``hessian_values`` and each diagonal entry
+            sits among the ``nnz``.
+        segment_ids, segment_counts: per factor set, the id of each factor's variable tuple
+            and the number of distinct tuples where tuples repeat (``None`` and F where
+            they do not): ``hessian_values``' arguments.
+        bandwidth: the largest column − row of a stored entry.
+    """
+
+    def __init__(self, indices: Sequence[onp.ndarray], num_variables: int, k: int):
+        size = num_variables * k
+        rows, cols = [], []
+        self.segment_ids: list = []
+        self.segment_counts: list = []
+        for index in indices:
+            index = onp.asarray(index, onp.int64)
+            same = index[:, :, None] == index[:, None, :]
+            if onp.any(same & ~onp.eye(index.shape[1], dtype=bool)):
+                raise ValueError("BlockPattern: a factor names one variable twice")
+            tuples, ids = onp.unique(index, axis=0, return_inverse=True)
+            repeats = len(tuples) < len(index)
+            self.segment_ids.append(ids.ravel().astype(onp.int32) if repeats else None)
+            self.segment_counts.append(len(tuples) if repeats else len(index))
+            if repeats:
+                index = tuples
+            p, q = onp.triu_indices(index.shape[1] * k)
+            r = index[:, p // k] * k + p % k
+            c = index[:, q // k] * k + q % k
+            rows.append(onp.minimum(r, c).ravel())
+            cols.append(onp.maximum(r, c).ravel())
+        row, col = onp.concatenate(rows), onp.concatenate(cols)
+        diagonal = onp.arange(size)  # every diagonal entry exists, even if unconstrained
+        keys = onp.concatenate([col * size + row, diagonal * size + diagonal])
+        unique, inverse = onp.unique(keys, return_inverse=True)
+        self.size = size
+        self.nnz = len(unique)
+        self.indices = (unique % size).astype(onp.int64)
+        self.indptr = onp.searchsorted(unique // size, onp.arange(size + 1)).astype(onp.int64)
+        self.columns = onp.repeat(onp.arange(size), onp.diff(self.indptr))  # of each nonzero
+        self.scatter = inverse[: len(row)].astype(onp.int64)
+        self.diagonal = inverse[len(row) :].astype(onp.int64)
+        self.bandwidth = int(onp.max(self.columns - self.indices))
+
+    def assemble(self, values: onp.ndarray) -> onp.ndarray:
+        """The nonzeros of H's upper triangle, in compressed-column order."""
+        return onp.bincount(self.scatter, weights=values, minlength=self.nnz)
+
+
+def installed(backend: str) -> bool:
+    """Whether the package of a sparse Cholesky backend (``"cholmod"``, ``"qdldl"``)
+    imports."""
+    modules = {"cholmod": ("cvxopt", "cvxopt.cholmod"), "qdldl": ("qdldl", "scipy.sparse")}
+    try:
+        for module in modules[backend]:
+            importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
+
+
+class SparseCholesky:
+    """(H + λD) δ = −g on the host by CHOLMOD (``backend="cholmod"``, supernodal unless
+    ``supernodal=False``) or QDLDL (``"qdldl"``); the symbolic analysis is done once, on the
+    first ``solve``."""
+
+    def __init__(self, pattern: BlockPattern, backend: str = "qdldl", supernodal: bool = True):
+        if backend not in ("cholmod", "qdldl"):
+            raise ValueError(
+                f"SparseCholesky: backend must be 'cholmod' or 'qdldl', got {backend!r}"
+            )
+        if not installed(backend):
+            extra, package = (
+                ("cholmod", "cvxopt") if backend == "cholmod" else ("pose-graph", "qdldl")
+            )
+            raise ImportError(
+                f"linear_solver={backend!r} needs the {package} package: pip install "
+                f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
+            )
+        self.backend = backend
+        self.supernodal = supernodal
+        self.pattern = pattern
+        self._solver: Optional[Any] = None
+        self._matrix: Optional[Any] = None
+
+    def solve(self, data: onp.ndarray, damping: onp.ndarray, g: onp.ndarray) -> onp.ndarray:
+        """δ for the nonzeros ``data`` of H, the diagonal ``damping`` λD added, and the
+        gradient ``g`` (flat)."""
+        pat = self.pattern
+        damped = data.copy()
+        damped[pat.diagonal] += damping
+        if self.backend == "cholmod":
+            return self._solve_cholmod(damped, g)
+        csc = importlib.import_module("scipy.sparse").csc_matrix
+        matrix = csc((damped, pat.indices, pat.indptr), shape=(pat.size, pat.size))
+        if self._solver is None:
+            self._solver = importlib.import_module("qdldl").Solver(matrix, upper=True)
+        else:
+            self._solver.update(matrix, upper=True)
+        return -self._solver.solve(g)
+
+    def _solve_cholmod(self, damped: onp.ndarray, g: onp.ndarray) -> onp.ndarray:
+        cvxopt = importlib.import_module("cvxopt")
+        cholmod = importlib.import_module("cvxopt.cholmod")
+        pat = self.pattern
+        if self._matrix is None:
+            # Built once in compressed-column order (sorted, no duplicates), so that its
+            # values are ``damped`` in the same order; the symbolic analysis once too.
+            self._matrix = cvxopt.spmatrix(
+                cvxopt.matrix(damped),
+                cvxopt.matrix(pat.indices.astype(onp.int64)),
+                cvxopt.matrix(pat.columns.astype(onp.int64)),
+                (pat.size, pat.size),
+            )
+            if list(self._matrix.I) != pat.indices.tolist():  # pragma: no cover
+                raise AssertionError("cvxopt reordered the compressed-column pattern")
+            saved = cholmod.options.get("supernodal")
+            cholmod.options["supernodal"] = 2 if self.supernodal else 0  # never "choose" (1)
+            try:
+                self._solver = cholmod.symbolic(self._matrix, uplo="U")
+            finally:  # cvxopt's options are global: leave them as they were
+                if saved is None:
+                    del cholmod.options["supernodal"]
+                else:
+                    cholmod.options["supernodal"] = saved
+        else:
+            self._matrix.V = cvxopt.matrix(damped)  # (``V`` is a copy: ``V[:] =`` is lost)
+        try:
+            cholmod.numeric(self._matrix, self._solver)
+        except ArithmeticError:  # not positive definite: a non-finite step, as QDLDL gives
+            return onp.full(pat.size, onp.nan)
+        x = cvxopt.matrix(-g)
+        cholmod.solve(self._solver, x)
+        return onp.asarray(x).ravel()
+
+
+class BandedCholesky:
+    """(H + λD) δ = −g on the host by LAPACK's banded Cholesky (``scipy.linalg``), H held by
+    its ``pattern.bandwidth + 1`` upper diagonals; ``dense=True`` holds and factorises all
+    of H instead (``potrf``)."""
+
+    def __init__(self, pattern: BlockPattern, dense: bool = False):
+        self.pattern, self.dense = pattern, dense
+        self.linalg = importlib.import_module("scipy.linalg")
+        u, n = pattern.bandwidth, pattern.size
+        rows, cols = pattern.indices, pattern.columns
+        self.shape = (n, n) if dense else (u + 1, n)
+        self.where = rows * n + cols if dense else (u + rows - cols) * n + cols
+
+    def solve(self, data: onp.ndarray, damping: onp.ndarray, g: onp.ndarray) -> onp.ndarray:
+        """As ``SparseCholesky.solve``; a matrix that is not positive definite gives NaN."""
+        damped = data.copy()
+        damped[self.pattern.diagonal] += damping
+        H = onp.zeros(self.shape)
+        H.flat[self.where] = damped
+        la = self.linalg
+        try:
+            if self.dense:
+                return la.cho_solve(la.cho_factor(H, check_finite=False), -g, check_finite=False)
+            return la.cho_solve_banded((la.cholesky_banded(H, check_finite=False), False), -g)
+        except la.LinAlgError:
+            return onp.full(self.pattern.size, onp.nan)
+
+
+def pcg(
+    factors: Sequence[Factors],
+    g: jax.Array,
+    D: jax.Array,
+    damping: jax.Array,
+    tolerance: float,
+    max_iterations: int,
+) -> jax.Array:
+    """δ ``(n, k)`` solving (H + diag(damping)) δ = −g by conjugate gradients with the
+    block-Jacobi preconditioner (D + diag(damping))⁻¹, D ``(n, k, k)`` the diagonal blocks
+    of H."""
+    k = g.shape[-1]
+    blocks = D + damping[..., None] * jnp.eye(k, dtype=D.dtype)
+    inverse = jnp.linalg.inv(blocks)
+    delta, _ = jax.scipy.sparse.linalg.cg(
+        lambda x: matvec(factors, x) + damping * x,
+        -g,
+        tol=tolerance,
+        maxiter=max_iterations,
+        M=lambda r: matmul(inverse, r[..., None])[..., 0],
+    )
+    return delta
