@@ -161,7 +161,12 @@ class BlockPattern:
             same = index[:, :, None] == index[:, None, :]
             if onp.any(same & ~onp.eye(index.shape[1], dtype=bool)):
                 raise ValueError("BlockPattern: a factor names one variable twice")
-            tuples, ids = onp.unique(index, axis=0, return_inverse=True)
+            if float(num_variables) ** index.shape[1] < 2.0**62:  # one int64 key per tuple
+                key = index @ (num_variables ** onp.arange(index.shape[1], dtype=onp.int64))
+                _, first, ids = onp.unique(key, return_index=True, return_inverse=True)
+                tuples = index[first]
+            else:
+                tuples, ids = onp.unique(index, axis=0, return_inverse=True)
             repeats = len(tuples) < len(index)
             self.segment_ids.append(ids.ravel().astype(onp.int32) if repeats else None)
             self.segment_counts.append(len(tuples) if repeats else len(index))
