@@ -271,6 +271,8 @@ def system(
     """The linear system of a problem: a ``HostSystem`` or a ``DeviceSystem``, by
     ``choose_linear_solver``; ``indices`` are the host arrays ``(F, m)`` of each factor
     set's variables."""
+    if linear_solver == "pcg":  # matrix-free: no pattern to build
+        return DeviceSystem(model, data, n, diagonal_damping, cg_tolerance, cg_max_iterations)
     pattern = BlockPattern(indices, n, k)
     chosen = choose_linear_solver(linear_solver, pattern)
     if chosen == "pcg":
