@@ -14,11 +14,13 @@ own cost of its estimate, which agrees to rounding.
 
 GTSAM runs ``LevenbergMarquardtOptimizer`` with its default parameters (λ₀ = 1e-5, λI
 damping, relative and absolute error tolerances 1e-5, at most 100 iterations): its time is
-that of ``optimize()``; its cost-versus-time curve comes from a second run, one
-``iterate()`` at a time. Ours runs ``solve`` with its defaults (Levenberg–Marquardt, a
-sparse Cholesky on the host, relative tolerance 1e-7): once cold (tracing and compiling
-included) and then warm; the curve and the times in the table are the warm run's, the cold
-time is listed beside.
+that of ``optimize()``, the optimiser's construction included; its cost-versus-time curve
+comes from a separate run, one ``iterate()`` at a time. Ours runs ``solve`` with its
+defaults (Levenberg–Marquardt, a sparse Cholesky on the host, relative tolerance 1e-7):
+once cold (tracing and compiling included), then warm. The warm runs of both sides
+alternate, at least ``REPEATS`` of each and ``MIN_SECONDS`` in all; the table shows each
+side's fastest (on a shared machine, noise only adds time) and the raw file keeps every
+run. Our curve is that of our fastest warm run.
 The defaults factorise with CHOLMOD's supernodal Cholesky where ``cvxopt`` is installed, else
 with QDLDL; the raw file records which.
 
@@ -54,6 +56,7 @@ DATASETS = {
     "w20000": ("w20000", {"information_order": "g2o"}, False),
 }
 ANCHOR_SIGMA = 1e-6
+REPEATS, MIN_SECONDS = 3, 2.0
 
 
 def swap_blocks(information: np.ndarray) -> np.ndarray:
@@ -101,6 +104,15 @@ def _linear_solver() -> str:
     return "CHOLMOD (cvxopt)" if installed("cholmod") else "QDLDL"
 
 
+def gtsam_time(factors, values) -> float:
+    """Wall time of one ``optimize()`` with default parameters, the optimiser built inside."""
+    import gtsam
+
+    start = time.perf_counter()
+    gtsam.LevenbergMarquardtOptimizer(factors, values, gtsam.LevenbergMarquardtParams()).optimize()
+    return time.perf_counter() - start
+
+
 def run_gtsam(factors, values) -> dict:
     import gtsam
 
@@ -141,6 +153,16 @@ def run_dataset(name: str, gtsam_module) -> dict:
     gt = run_gtsam(factors, values)
     cold = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA)
     warm = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA)
+    # Warm repetitions, GTSAM's and ours interleaved: at least REPEATS of each and about
+    # MIN_SECONDS in all; the table shows the fastest of each side.
+    gtsam_s, ours_s = [gt["time_s"]], [warm.time]
+    begin = time.perf_counter()
+    while len(ours_s) < REPEATS or time.perf_counter() - begin < MIN_SECONDS:
+        gtsam_s.append(gtsam_time(factors, values))
+        again = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA)
+        ours_s.append(again.time)
+        if again.time < warm.time:
+            warm = again
     ours_in_gtsam = factors.error(to_gtsam(warm.graph)[1])
     row = {
         "dataset": name,
@@ -154,26 +176,28 @@ def run_dataset(name: str, gtsam_module) -> dict:
         "initial_cost_gtsam": factors.error(values),
         "gtsam_final": gt["final_cost"],
         "gtsam_iterations": gt["iterations"],
-        "gtsam_s": gt["time_s"],
+        "gtsam_s": min(gtsam_s),
+        "gtsam_runs_s": gtsam_s,
         "gtsam_costs": gt["costs"],
         "gtsam_times": gt["times"],
         "ours_final": float(warm.costs[-1]),
         "ours_final_in_gtsam": ours_in_gtsam,
         "ours_iterations": warm.iterations,
-        "ours_s": warm.time,
+        "ours_s": min(ours_s),
+        "ours_runs_s": ours_s,
         "ours_cold_s": cold.time,
         "ours_costs": warm.costs.tolist(),
         "ours_times": warm.times.tolist(),
         "ours_stop": warm.stop_reason,
         "ratio_final": ours_in_gtsam / gt["final_cost"],
         "reaches_gtsam": bool(ours_in_gtsam <= gt["final_cost"] * (1 + 1e-6)),
-        "time_ratio": warm.time / gt["time_s"],
+        "time_ratio": min(ours_s) / min(gtsam_s),
     }
     print(
         f"{name:30s} N={row['poses']:6d} E={row['edges']:6d}  initial {initial:.6e}  "
-        f"GTSAM {gt['final_cost']:.9g} in {gt['iterations']} its, {gt['time_s']:.2f} s  |  "
+        f"GTSAM {gt['final_cost']:.9g} in {gt['iterations']} its, {row['gtsam_s']:.4f} s  |  "
         f"ours {row['ours_final']:.9g} (GTSAM's cost of it {ours_in_gtsam:.9g}) in "
-        f"{warm.iterations} its, {warm.time:.2f} s warm, {cold.time:.2f} s cold  "
+        f"{warm.iterations} its, {row['ours_s']:.4f} s warm, {cold.time:.2f} s cold  "
         f"{'≤' if row['reaches_gtsam'] else '>'} GTSAM × (1 + 1e-6)",
         flush=True,
     )
