@@ -1045,7 +1045,8 @@ tolerances 1e-5, at most 100 iterations), timed `optimize()`, the optimiser's co
 included. Ours: `pose_graph.solve` with its defaults (Levenberg–Marquardt, λI damping, a
 sparse Cholesky on the host, relative tolerance 1e-7, float64; the factorisation, CHOLMOD
 or QDLDL, is named per machine): "first call" includes tracing and compiling. The other
-times are warm: GTSAM's and our solves alternate, at least 3 of each and 2 s in all, and each
+times are warm: GTSAM's and our solves alternate, at least 7 of each (3 where GTSAM takes over
+5 s) and 2 s in all, and each
 side's fastest run is shown (on a shared virtual machine, noise only adds time); the
 cost-against-time curves are those of a warm run.
 "sphere2500, load3D's blocks" swaps the 3 × 3 blocks of every information matrix, the

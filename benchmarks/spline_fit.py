@@ -156,6 +156,15 @@ def main(argv=None) -> int:
         print(json.dumps(one_case(int(args.case[0]), args.case[1])))
         return 0
     solvers = args.solvers or default_solvers()
+    # The machine and the tree as the run starts (an edit during the run is not measured).
+    info = _run.machine_info(
+        "benchmarks/spline_fit.py",
+        dtype="float64",
+        scipy=_run.version_of("scipy"),
+        qdldl=_run.version_of("qdldl"),
+        cvxopt=_run.version_of("cvxopt"),
+        memory_available_gb=available_bytes() / 1e9,
+    )
     start = time.perf_counter()
     rows = []
     for n in args.sizes:
@@ -179,14 +188,6 @@ def main(argv=None) -> int:
     elapsed = time.perf_counter() - start
     print(f"total benchmark time: {elapsed:.0f} s")
     if args.save:
-        info = _run.machine_info(
-            "benchmarks/spline_fit.py",
-            dtype="float64",
-            scipy=_run.version_of("scipy"),
-            qdldl=_run.version_of("qdldl"),
-            cvxopt=_run.version_of("cvxopt"),
-            memory_available_gb=available_bytes() / 1e9,
-        )
         save("spline-fit", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
     return 0
 

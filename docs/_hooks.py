@@ -7,6 +7,12 @@
 natively: the pages need no script, font or network to show their formulas, also when
 opened from disk. A formula that does not convert fails the build, naming the page.
 
+The notebooks in ``notebooks/`` are added the same way, as ``notebooks/<name>.ipynb``, before
+``mkdocs-jupyter`` (which executes and renders them) looks at the files. Their Markdown cells
+keep TeX between ``$ … $`` and ``$$ … $$``, and the notebook template loads MathJax from a
+CDN (and Mermaid, for diagrams); ``on_page_content`` removes those scripts and renders the
+formulas as MathML too.
+
 The benchmark scripts generate ``benchmarks/RESULTS.md``, with its plot
 ``benchmarks/results.png`` beside it. ``on_files`` adds every Markdown and PNG file under
 ``benchmarks/`` to the site at the same relative path: ``benchmarks/RESULTS.md`` is the
@@ -29,9 +35,11 @@ from pathlib import Path
 
 from latex2mathml.converter import convert
 from mkdocs.exceptions import PluginError
+from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File, Files, InclusionLevel
 
 SOURCE = "benchmarks"
+NOTEBOOKS = "notebooks"
 IN_NAV = {"benchmarks/RESULTS.md", "benchmarks/README.md"}
 SUFFIXES = {".md", ".png"}
 
@@ -53,7 +61,52 @@ def _mathml(match: re.Match, where: str) -> str:
     return f'<{tag} class="arithmatex">{math}</{tag}>'
 
 
+# A notebook's rendered Markdown cell, and the TeX in it: $$ … $$ (display) or $ … $ (inline).
+_MARKDOWN_CELL = re.compile(
+    r'(<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>)(.*?)(</div>)', re.DOTALL
+)
+_NOTEBOOK_MATH = re.compile(r"\$\$(.+?)\$\$|(?<![\\$])\$(?!\s)([^$]+?)(?<!\s)\$", re.DOTALL)
+# The notebook template's scripts that would load from a CDN: MathJax (its tag and its
+# configuration) and the Mermaid loader (the notebooks draw no Mermaid diagrams).
+_REMOTE_SCRIPTS = re.compile(
+    r"<!-- Load mathjax -->.*?<!-- End of mathjax configuration -->"
+    r'|<script type="module">(?:(?!</script>).)*?mermaid(?:(?!</script>).)*?</script>',
+    re.DOTALL | re.IGNORECASE,
+)
+
+
+def _notebook_mathml(match: re.Match, where: str) -> str:
+    display, inline = match.groups()
+    tex = html.unescape(display if display is not None else inline).strip()
+    mode = "block" if display is not None else "inline"
+    try:
+        return convert(tex, display=mode)
+    except Exception as error:
+        raise PluginError(f"{where}: cannot render {tex!r} as MathML: {error}") from error
+
+
+def _notebook_content(content: str, where: str) -> str:
+    content = _REMOTE_SCRIPTS.sub("", content)
+    name = posixpath.basename(where)
+    content = (
+        f'<p><em>The notebook: <a href="{name}"><code>{name}</code></a>. This page shows it as '
+        "executed when the site was built.</em></p>\n" + content
+    )
+
+    def cell(match: re.Match) -> str:
+        opening, body, closing = match.groups()
+        parts = re.split(r"(<pre.*?</pre>|<code.*?</code>)", body, flags=re.DOTALL)
+        parts[::2] = [
+            _NOTEBOOK_MATH.sub(lambda m: _notebook_mathml(m, where), t) for t in parts[::2]
+        ]
+        return opening + "".join(parts) + closing
+
+    return _MARKDOWN_CELL.sub(cell, content)
+
+
 def on_page_content(content: str, page, config, files: Files) -> str:
+    if page.file.src_uri.endswith(".ipynb"):
+        content = _notebook_content(content, page.file.src_uri)
     return _MATH.sub(lambda m: _mathml(m, page.file.src_uri), content)
 
 
@@ -61,8 +114,14 @@ def _root(config) -> Path:
     return Path(config["config_file_path"]).resolve().parent
 
 
+@event_priority(100)  # before mkdocs-jupyter's, which turns the notebooks into pages
 def on_files(files: Files, config) -> Files:
     root = _root(config)
+    # A file under the repository root (not generated): mkdocs-jupyter's wrapper reads the
+    # source path from it.
+    for path in sorted((root / NOTEBOOKS).glob("*.ipynb")):
+        src = path.relative_to(root).as_posix()
+        files.append(File(src, str(root), config["site_dir"], config["use_directory_urls"]))
     for path in sorted((root / SOURCE).rglob("*")):
         if not path.is_file() or path.suffix not in SUFFIXES:
             continue

@@ -60,6 +60,13 @@ def test_site_loads_nothing_from_the_network(site: Path) -> None:
         if re.match(r"^([a-z][a-z0-9+.-]*:)?//", url, re.I) and not url.startswith("data:")
     }
     assert not remote, sorted(remote)[:10]
+    # Nor a module a script would import at run time.
+    imported = {
+        page.relative_to(site).as_posix()
+        for page, text in _pages(site).items()
+        if re.search(r"""import\(\s*["'](https?:)?//""", text)
+    }
+    assert not imported, sorted(imported)
 
 
 def test_maths_is_mathml_with_no_tex_left(site: Path) -> None:
@@ -121,6 +128,29 @@ def test_site_builds_with_the_benchmark_results(site: Path) -> None:
     assert (site / "benchmarks" / "RESULTS.html").is_file()
     assert (site / "benchmarks" / "results.png").is_file()
     assert not (DOCS / "benchmarks").exists()
+
+
+def test_notebooks_are_pages_executed_at_build_time(site: Path) -> None:
+    """Every notebook in ``notebooks/`` is a page of the site with the outputs of its
+    execution during the build (figures included, no error), its Markdown maths as MathML
+    and a link to its ``.ipynb``. The committed notebooks carry no outputs
+    (``test_notebooks``), so every output here comes from the build."""
+    notebooks = sorted((REPO / "notebooks").glob("*.ipynb"))
+    assert notebooks
+    for notebook in notebooks:
+        page = site / "notebooks" / f"{notebook.stem}.html"
+        text = page.read_text(encoding="utf-8")
+        assert "data:image/png;base64," in text, f"{page.name}: no figure in the outputs"
+        assert "jp-OutputArea-output" in text, f"{page.name}: no output"
+        assert "Traceback" not in text and "jp-OutputArea-error" not in text, page.name
+        assert (site / "notebooks" / notebook.name).is_file()
+        assert f'href="{notebook.name}"' in text, f"{page.name}: no link to {notebook.name}"
+        cells = re.findall(
+            r'<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>(.*?)</div>', text, flags=re.S
+        )
+        prose = [re.sub(r"<(math|code|pre)\b.*?</\1>", "", c, flags=re.S) for c in cells]
+        assert cells and not any("$" in c for c in prose), f"{page.name}: TeX left in the prose"
+        assert "<math" in "".join(cells), f"{page.name}: no maths rendered"
 
 
 def test_every_public_module_has_its_own_api_page(site: Path) -> None:
