@@ -1105,8 +1105,8 @@ def pose_graphs_section(raw: dict, order: list) -> list:
         ]
         lines += table(header, body, "lrrrrrlrrrr") + [""]
         per_it = ", ".join(
-            f"{r['dataset']} {1e3 * r['gtsam_s'] / max(r['gtsam_iterations'], 1):.0f} / "
-            f"{1e3 * r['ours_s'] / max(r['ours_iterations'], 1):.0f} ms"
+            f"{r['dataset']} {1e3 * r['gtsam_s'] / max(r['gtsam_iterations'], 1):.3g} / "
+            f"{1e3 * r['ours_s'] / max(r['ours_iterations'], 1):.3g} ms"
             for r in res
         )
         lines += [f"Per iteration, GTSAM / ours: {per_it}.", ""]

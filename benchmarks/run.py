@@ -173,22 +173,30 @@ def version_of(dist: str) -> str:
         return "not installed"
 
 
+#: What the scripts themselves write: a tree that differs from its commit only there is clean.
+RESULT_FILES = ("benchmarks/raw/", "benchmarks/RESULTS.md", "benchmarks/results.png",
+                "benchmarks/pose_graphs.png")  # fmt: skip
+
+
 def git_commit() -> str:
+    """The checkout's commit, with ``-dirty`` when ``dirty_files`` names any file."""
     try:
         out = subprocess.run(
-            ["git", "-C", _REPO_ROOT, "describe", "--always", "--dirty", "--abbrev=7"],
+            ["git", "-C", _REPO_ROOT, "rev-parse", "--short=7", "HEAD"],
             capture_output=True,
             text=True,
             timeout=10,
         )
-        return out.stdout.strip() or "unknown"
+        commit = out.stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+    return commit + "-dirty" if dirty_files() else commit
 
 
 def dirty_files() -> list:
     """The tracked files that differ from the commit (``git status``), so that a page
-    rendered from a run of a modified tree says which files differed."""
+    rendered from a run of a modified tree says which files differed. The benchmark results
+    (``RESULT_FILES``) are not counted: one script's run may follow another's ``--save``."""
     try:
         out = subprocess.run(
             ["git", "-C", _REPO_ROOT, "status", "--porcelain", "--untracked-files=no"],
@@ -196,7 +204,8 @@ def dirty_files() -> list:
             text=True,
             timeout=10,
         )
-        return sorted(line[3:].strip() for line in out.stdout.splitlines() if line.strip())
+        files = (line[3:].strip() for line in out.stdout.splitlines() if line.strip())
+        return sorted(f for f in files if not f.startswith(RESULT_FILES))
     except (OSError, subprocess.SubprocessError):
         return []
 
