@@ -9,9 +9,9 @@ package registry (``pip download jaxlie==1.5.* --no-binary :all:``). The sdist s
 test modules but not the helper module they import (``tests/utils.py``), so this script
 writes one, below: float64 (x64 on), groups and batch shapes as parameters, hypothesis
 seeding NumPy's global generator, elements from ``sample_uniform``, comparisons by
-``numpy.testing.assert_allclose`` (1e-8), a central-difference Jacobian. Every jaxlie module
-name (``jaxlie``, ``jaxlie.manifold``, ``jaxlie.hints``, ``jaxlie.utils``) is aliased to
-jaxlie_geo's by a ``conftest.py``.
+``numpy.testing.assert_allclose`` (1e-8), a central-difference Jacobian. A ``conftest.py``
+calls ``jaxlie_geo.interop.install_as_jaxlie()``, so every jaxlie module name (``jaxlie``,
+``jaxlie.manifold``, ``jaxlie.hints``, ``jaxlie.utils``) is jaxlie_geo's.
 
 Left out: ``test_jac_left.py``, which calls jaxlie's private ``_SO3_jac_left``, and the
 timing test (``test_jlog_runtime``), whose thresholds are for another machine. Run with
@@ -109,15 +109,11 @@ def jacnumerical(f, eps=1e-5):
 '''
 
 CONFTEST = """import os
-import sys
 
 if os.environ["JAXLIE_SUITE_TARGET"] == "jaxlie_geo":
-    import jaxlie_geo
-    from jaxlie_geo import hints, manifold, utils
+    import jaxlie_geo.interop
 
-    sys.modules["jaxlie"] = jaxlie_geo
-    for name, module in (("hints", hints), ("manifold", manifold), ("utils", utils)):
-        sys.modules["jaxlie." + name] = module
+    jaxlie_geo.interop.install_as_jaxlie()
 """
 
 

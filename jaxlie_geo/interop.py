@@ -1,19 +1,29 @@
-"""Conversion to and from jaxlie 1.5 objects, for libraries that check for jaxlie's types
-(jaxls, pyroki, viser, ...).
+"""jaxlie_geo in place of jaxlie 1.5: under its name for libraries built on it, or by
+conversion of the objects.
 
-Both libraries store the same parameters in the same layout (``SO2.unit_complex``,
-``SE2.unit_complex_xy``, ``SO3.wxyz``, ``SE3.wxyz_xyz``), so a conversion re-wraps the
-parameter array: no copy, no arithmetic, no sign change of a quaternion. Both functions take
-a single element or any pytree (dicts, lists, tuples, dataclasses) and convert every group
-element in it, leaving everything else as it is; they work inside ``jax.jit`` and ``vmap``.
-jaxlie is an optional dependency: it is imported on first use, and its absence raises
-``ImportError`` with the install command.
+``install_as_jaxlie()`` makes ``import jaxlie`` give jaxlie_geo to everything imported after
+it: libraries built on jaxlie (jaxls, pyroki, viser, ...) then create, check
+(``isinstance(x, jaxlie.SE3)``) and capture in closures jaxlie_geo's elements, with no change
+to their code. The name follows PyMySQL's ``install_as_MySQLdb()``.
+
+``to_jaxlie`` and ``from_jaxlie`` exchange data with a real jaxlie instead. Both libraries
+store the same parameters in the same layout (``SO2.unit_complex``, ``SE2.unit_complex_xy``,
+``SO3.wxyz``, ``SE3.wxyz_xyz``), so a conversion re-wraps the parameter array: no copy, no
+arithmetic, no sign change of a quaternion. Both functions take a single element or any
+pytree (dicts, lists, tuples, dataclasses) and convert every group element in it, leaving
+everything else as it is; they work inside ``jax.jit`` and ``vmap``. They do not reach a
+library's inside: the classes it checks for and the poses it keeps in closures stay
+jaxlie's. jaxlie is an optional dependency: it is imported on first use, and its absence
+raises ``ImportError`` with the install command.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Any, Dict, Tuple
+import importlib.abc
+import pkgutil
+import sys
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import jax
 
@@ -35,6 +45,72 @@ def _jaxlie_types() -> Dict[type, type]:
     return {G: getattr(jaxlie, G.__name__) for G in _OURS}
 
 
+class _NoOtherJaxlieModule(importlib.abc.MetaPathFinder):
+    """After ``install_as_jaxlie``: ``import jaxlie.<name>`` of a module jaxlie_geo does not
+    have fails, instead of loading a second copy of one of jaxlie_geo's files."""
+
+    def find_spec(self, fullname: str, path: Optional[Sequence[str]], target: Any = None) -> None:
+        if fullname.startswith("jaxlie."):
+            raise ModuleNotFoundError(
+                f"No module named {fullname!r}: `jaxlie` is jaxlie_geo here "
+                "(jaxlie_geo.interop.install_as_jaxlie), which has no module "
+                f"{'jaxlie_geo.' + fullname[len('jaxlie.') :]!r}.",
+                name=fullname,
+            )
+        return None
+
+
+def install_as_jaxlie() -> None:
+    """Make ``import jaxlie`` resolve to jaxlie_geo for every import that follows.
+
+    After the call, ``import jaxlie``, ``jaxlie.manifold``, ``jaxlie.hints`` and
+    ``jaxlie.utils`` (and every other module of jaxlie_geo, under ``jaxlie.``) are
+    jaxlie_geo's own module objects, so a library built on jaxlie and imported afterwards
+    works on jaxlie_geo's elements throughout: its ``isinstance(x, jaxlie.SE3)`` checks, the
+    poses it captures in closures under ``jit``, its pytrees. Call it first, before anything
+    imports jaxlie::
+
+        import jaxlie_geo.interop
+        jaxlie_geo.interop.install_as_jaxlie()
+        import jaxls  # sees jaxlie_geo as jaxlie
+
+    A second call does nothing. ``to_jaxlie`` and ``from_jaxlie`` then return their argument:
+    there is one library. Importing a ``jaxlie.<name>`` that jaxlie_geo does not have raises
+    ``ModuleNotFoundError``.
+
+    Raises:
+        RuntimeError: jaxlie (or a module of it) was imported before the call: the objects
+            already made from it would not be jaxlie_geo's, so the call refuses rather than
+            mix the two libraries.
+    """
+    ours = sys.modules[__package__]
+    present = sorted(name for name in sys.modules if name == "jaxlie" or name.startswith("jaxlie."))
+    if present and sys.modules.get("jaxlie") is ours:
+        return
+    if present:
+        where = getattr(sys.modules.get(present[0]), "__file__", None) or "unknown location"
+        raise RuntimeError(
+            f"install_as_jaxlie: jaxlie is already imported ({present[0]} from {where}). "
+            "Call jaxlie_geo.interop.install_as_jaxlie() before anything imports jaxlie."
+        )
+    for info in pkgutil.walk_packages(ours.__path__, ours.__name__ + "."):
+        try:
+            importlib.import_module(info.name)
+        except ImportError:  # a module behind an optional dependency: left unaliased
+            continue
+    aliases = {
+        "jaxlie" + name[len(ours.__name__) :]: module
+        for name, module in list(sys.modules.items())
+        if name == ours.__name__ or name.startswith(ours.__name__ + ".")
+    }
+    sys.modules.update(aliases)
+    sys.meta_path.insert(0, _NoOtherJaxlieModule())
+
+
+def _is_installed_as_jaxlie() -> bool:
+    return sys.modules.get("jaxlie") is sys.modules[__package__]
+
+
 def to_jaxlie(tree: Any) -> Any:
     """Replace every jaxlie_geo group element in ``tree`` by the jaxlie 1.5 element with
     the same parameters (``jaxlie.SE3(T.wxyz_xyz)`` for an ``SE3``; batch axes kept).
@@ -44,6 +120,8 @@ def to_jaxlie(tree: Any) -> Any:
     Returns:
         The same structure with jaxlie elements in place of ours.
     """
+    if _is_installed_as_jaxlie():
+        return tree
     ours_to_theirs = _jaxlie_types()
 
     def convert(x: Any) -> Any:
@@ -65,6 +143,8 @@ def from_jaxlie(tree: Any) -> Any:
     Returns:
         The same structure with jaxlie_geo elements in place of jaxlie's.
     """
+    if _is_installed_as_jaxlie():
+        return tree
     theirs_to_ours = {v: k for k, v in _jaxlie_types().items()}
     base = importlib.import_module("jaxlie").MatrixLieGroup  # (imported by _jaxlie_types)
 
@@ -81,4 +161,4 @@ def from_jaxlie(tree: Any) -> Any:
     return jax.tree.map(convert, tree, is_leaf=is_theirs)
 
 
-__all__ = ["to_jaxlie", "from_jaxlie"]
+__all__ = ["install_as_jaxlie", "to_jaxlie", "from_jaxlie"]

@@ -191,7 +191,8 @@ def _python_blocks(text: str) -> list[str]:
 
 def test_python_blocks_on_the_pages_run() -> None:
     """Each page's ```python blocks run as written, in order, in a fresh namespace (one
-    process for all pages)."""
+    process for all pages). A ```py block is shown, not run: it needs a package outside the
+    extras (a library built on jaxlie), and what it shows is tested elsewhere."""
     pages = {
         str(p.relative_to(DOCS)): "\n".join(_python_blocks(p.read_text(encoding="utf-8")))
         for p in sorted(DOCS.rglob("*.md"))
