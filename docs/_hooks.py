@@ -61,10 +61,10 @@ def _mathml(match: re.Match, where: str) -> str:
     return f'<{tag} class="arithmatex">{math}</{tag}>'
 
 
-# A notebook's rendered Markdown cell, and the TeX in it: $$ … $$ (display) or $ … $ (inline).
-_MARKDOWN_CELL = re.compile(
-    r'(<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>)(.*?)(</div>)', re.DOTALL
-)
+# A notebook's rendered Markdown cell (its opening tag; the cell ends at the matching
+# </div>), and the TeX in it: $$ … $$ (display) or $ … $ (inline).
+_MARKDOWN_CELL = re.compile(r'<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>')
+_DIV_TAG = re.compile(r"<div\b|</div>")
 _NOTEBOOK_MATH = re.compile(r"\$\$(.+?)\$\$|(?<![\\$])\$(?!\s)([^$]+?)(?<!\s)\$", re.DOTALL)
 # The notebook template's scripts that would load from a CDN: MathJax (its tag and its
 # configuration) and the Mermaid loader (the notebooks draw no Mermaid diagrams).
@@ -93,15 +93,26 @@ def _notebook_content(content: str, where: str) -> str:
         "executed when the site was built.</em></p>\n" + content
     )
 
-    def cell(match: re.Match) -> str:
-        opening, body, closing = match.groups()
+    def render(body: str) -> str:
         parts = re.split(r"(<pre.*?</pre>|<code.*?</code>)", body, flags=re.DOTALL)
         parts[::2] = [
             _NOTEBOOK_MATH.sub(lambda m: _notebook_mathml(m, where), t) for t in parts[::2]
         ]
-        return opening + "".join(parts) + closing
+        return "".join(parts)
 
-    return _MARKDOWN_CELL.sub(cell, content)
+    out, done = [], 0
+    for opening in _MARKDOWN_CELL.finditer(content):
+        if opening.start() < done:  # a cell inside a cell already rendered
+            continue
+        depth, end = 1, len(content)
+        for tag in _DIV_TAG.finditer(content, opening.end()):
+            depth += 1 if tag.group(0) == "<div" else -1
+            if depth == 0:
+                end = tag.start()
+                break
+        out += [content[done : opening.end()], render(content[opening.end() : end])]
+        done = end
+    return "".join(out) + content[done:]
 
 
 def on_page_content(content: str, page, config, files: Files) -> str:

@@ -145,12 +145,42 @@ def test_notebooks_are_pages_executed_at_build_time(site: Path) -> None:
         assert "Traceback" not in text and "jp-OutputArea-error" not in text, page.name
         assert (site / "notebooks" / notebook.name).is_file()
         assert f'href="{notebook.name}"' in text, f"{page.name}: no link to {notebook.name}"
-        cells = re.findall(
-            r'<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>(.*?)</div>', text, flags=re.S
-        )
+        cells = _markdown_cells(text)
         prose = [re.sub(r"<(math|code|pre)\b.*?</\1>", "", c, flags=re.S) for c in cells]
         assert cells and not any("$" in c for c in prose), f"{page.name}: TeX left in the prose"
         assert "<math" in "".join(cells), f"{page.name}: no maths rendered"
+
+
+def _markdown_cells(text: str) -> list[str]:
+    """The body of every rendered Markdown cell of a notebook page, nested divs included."""
+    cells = []
+    for opening in re.finditer(r'<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>', text):
+        depth = 1
+        for tag in re.finditer(r"<div\b|</div>", text[opening.end() :]):
+            depth += 1 if tag.group(0) == "<div" else -1
+            if depth == 0:
+                cells.append(text[opening.end() : opening.end() + tag.start()])
+                break
+    return cells
+
+
+def test_notebook_maths_after_a_nested_block_is_rendered() -> None:
+    """A Markdown cell whose code block renders as a nested ``div``: the maths on both sides
+    of it becomes MathML, the code keeps its dollar signs."""
+    spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "_hooks.py")
+    assert spec is not None and spec.loader is not None
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    cell = (
+        '<div class="jp-RenderedMarkdown"><p>Before: $x^2$.</p>'
+        '<div class="highlight"><pre><code>cost = "$5"</code></pre></div>'
+        "<p>After: $$\\theta$$ and $y$.</p></div><p>Outside: $1 and $2</p>"
+    )
+    out = hooks._notebook_content(cell, "notebooks/tour.ipynb")
+    (body,) = _markdown_cells(out)
+    assert body.count("<math") == 3, body
+    assert 'cost = "$5"' in body
+    assert "<p>Outside: $1 and $2</p>" in out  # text outside a Markdown cell is left alone
 
 
 def test_every_public_module_has_its_own_api_page(site: Path) -> None:
