@@ -2,7 +2,7 @@
 conversion of the objects.
 
 ``install_as_jaxlie()`` makes ``import jaxlie`` give jaxlie_geo to everything imported after
-it: libraries built on jaxlie (jaxls, pyroki, viser, ...) then create, check
+it: libraries built on jaxlie (jaxls, pyroki, ...) then create, check
 (``isinstance(x, jaxlie.SE3)``) and capture in closures jaxlie_geo's elements, with no change
 to their code. The name follows PyMySQL's ``install_as_MySQLdb()``.
 
@@ -118,7 +118,8 @@ def to_jaxlie(tree: Any) -> Any:
     Args:
         tree: a group element, or a pytree containing group elements.
     Returns:
-        The same structure with jaxlie elements in place of ours.
+        The same structure with jaxlie elements in place of ours; ``tree`` itself after
+        ``install_as_jaxlie()``, when jaxlie's classes are ours.
     """
     if _is_installed_as_jaxlie():
         return tree
@@ -141,7 +142,8 @@ def from_jaxlie(tree: Any) -> Any:
     Args:
         tree: a jaxlie element, or a pytree containing jaxlie elements.
     Returns:
-        The same structure with jaxlie_geo elements in place of jaxlie's.
+        The same structure with jaxlie_geo elements in place of jaxlie's; ``tree`` itself
+        after ``install_as_jaxlie()``.
     """
     if _is_installed_as_jaxlie():
         return tree
