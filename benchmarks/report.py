@@ -1127,9 +1127,10 @@ tolerance of 1e-10, with one linear solver per row: **dense**, LAPACK's Cholesky
 6n × 6n normal matrix; **banded**, LAPACK's banded Cholesky of the same matrix (23
 off-diagonals); **CHOLMOD** (supernodal, through cvxopt) and **QDLDL**, sparse. Every
 solver reaches the same final cost to 1e-9 relative. Each row runs in its own process:
-"first call" includes tracing and compiling, "warm" is a second fit of the same data;
-"peak memory" is the process's peak resident set (`VmHWM`), JAX and the data included, and
-"fit's share" its increase over the peak before the first fit. The dense solver is not run
+"first call" includes tracing and compiling, "warm" is one second fit of the same data (a
+single run, so it carries the machine's noise); "peak memory" is the process's peak resident
+set (`VmHWM`), JAX and the data included, and "fit's share" its increase over the peak
+before the first fit (the compiler's memory included). The dense solver is not run
 where its matrix alone needs more than half the available memory.\
 """
 
