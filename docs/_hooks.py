@@ -101,8 +101,19 @@ def _notebook_content(content: str, where: str) -> str:
         return "".join(parts)
 
     out, done = [], 0
+    for start, end in markdown_cells(content):
+        out += [content[done:start], render(content[start:end])]
+        done = end
+    return "".join(out) + content[done:]
+
+
+def markdown_cells(content: str) -> list[tuple[int, int]]:
+    """Where the body of each rendered Markdown cell of a notebook page lies in ``content``:
+    ``(start, end)``, from its opening tag to the matching ``</div>``, nested divs included;
+    a cell inside another is part of the outer one."""
+    spans: list[tuple[int, int]] = []
     for opening in _MARKDOWN_CELL.finditer(content):
-        if opening.start() < done:  # a cell inside a cell already rendered
+        if spans and opening.start() < spans[-1][1]:
             continue
         depth, end = 1, len(content)
         for tag in _DIV_TAG.finditer(content, opening.end()):
@@ -110,9 +121,8 @@ def _notebook_content(content: str, where: str) -> str:
             if depth == 0:
                 end = tag.start()
                 break
-        out += [content[done : opening.end()], render(content[opening.end() : end])]
-        done = end
-    return "".join(out) + content[done:]
+        spans.append((opening.end(), end))
+    return spans
 
 
 def on_page_content(content: str, page, config, files: Files) -> str:

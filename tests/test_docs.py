@@ -151,36 +151,33 @@ def test_notebooks_are_pages_executed_at_build_time(site: Path) -> None:
         assert "<math" in "".join(cells), f"{page.name}: no maths rendered"
 
 
-def _markdown_cells(text: str) -> list[str]:
-    """The body of every rendered Markdown cell of a notebook page, nested divs included."""
-    cells = []
-    for opening in re.finditer(r'<div class="[^"]*jp-RenderedMarkdown[^"]*"[^>]*>', text):
-        depth = 1
-        for tag in re.finditer(r"<div\b|</div>", text[opening.end() :]):
-            depth += 1 if tag.group(0) == "<div" else -1
-            if depth == 0:
-                cells.append(text[opening.end() : opening.end() + tag.start()])
-                break
-    return cells
-
-
-def test_notebook_maths_after_a_nested_block_is_rendered() -> None:
-    """A Markdown cell whose code block renders as a nested ``div``: the maths on both sides
-    of it becomes MathML, the code keeps its dollar signs."""
+def _hooks() -> types.ModuleType:
+    """``docs/_hooks.py``, the site's build hooks, as a module."""
     spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "_hooks.py")
     assert spec is not None and spec.loader is not None
     hooks = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(hooks)
+    return hooks
+
+
+def _markdown_cells(text: str) -> list[str]:
+    """The body of every rendered Markdown cell of a notebook page, nested divs included."""
+    return [text[start:end] for start, end in _hooks().markdown_cells(text)]
+
+
+def test_notebook_maths_after_a_nested_block_is_rendered() -> None:
+    """A Markdown cell whose code block renders as a nested ``div``: the maths on both sides
+    of it becomes MathML, the code keeps its dollar signs, and text outside the cell is left
+    as it is."""
     cell = (
         '<div class="jp-RenderedMarkdown"><p>Before: $x^2$.</p>'
         '<div class="highlight"><pre><code>cost = "$5"</code></pre></div>'
         "<p>After: $$\\theta$$ and $y$.</p></div><p>Outside: $1 and $2</p>"
     )
-    out = hooks._notebook_content(cell, "notebooks/tour.ipynb")
-    (body,) = _markdown_cells(out)
-    assert body.count("<math") == 3, body
-    assert 'cost = "$5"' in body
-    assert "<p>Outside: $1 and $2</p>" in out  # text outside a Markdown cell is left alone
+    out = _hooks()._notebook_content(cell, "notebooks/tour.ipynb")
+    assert out.count("<math") == 3, out
+    assert 'cost = "$5"' in out
+    assert out.endswith("</div><p>Outside: $1 and $2</p>")
 
 
 def test_every_public_module_has_its_own_api_page(site: Path) -> None:
