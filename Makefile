@@ -44,12 +44,12 @@ test: lint
 # The benchmarks: each run replaces this machine's raw results and regenerates
 # benchmarks/RESULTS.md and its plot (benchmarks/README.md).
 bench: $(VENV)/.installed-test
-	$(PY) benchmarks/run.py --save
-	$(PY) benchmarks/run.py --dtype float64 --save
-	$(PY) benchmarks/jacobians.py --save
+	$(PY) -m benchmarks.run --save
+	$(PY) -m benchmarks.run --dtype float64 --save
+	$(PY) -m benchmarks.jacobians --save
 
 accuracy: $(VENV)/.installed-test
-	$(PY) benchmarks/accuracy.py --save
+	$(PY) -m benchmarks.accuracy --save
 
 # The documentation site (mkdocs-material + mkdocstrings, docs/ and the docstrings): open
 # out/site/index.html. Strict: a broken link or an unparsable docstring fails the build.

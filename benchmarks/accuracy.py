@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Accuracy benchmark: worst error in ulp of exp, log and the derivatives of log∘exp,
 jaxlie_geo next to jaxlie 1.5, against mpmath references.
 
@@ -23,37 +22,28 @@ With --save the worst errors replace raw/<machine>/accuracy.json and the results
 (RESULTS.md) is regenerated (report.py).
 
 Usage:
-  python benchmarks/accuracy.py                 # markdown tables (float32, float64, Sim3)
-  python benchmarks/accuracy.py --save          # ... saved to raw/<machine>/, page regenerated
-  python benchmarks/accuracy.py --long          # one row per (group, op, dtype, regime)
-  python benchmarks/accuracy.py --worst         # also list the worst input of each failing cell
-  python benchmarks/accuracy.py --samples 16 --groups SE3 --json out.json
-  python benchmarks/accuracy.py --groups Sim3 --no-jaxlie   # Sim3's tables alone
+  python -m benchmarks.accuracy                 # markdown tables (float32, float64, Sim3)
+  python -m benchmarks.accuracy --save          # ... saved to raw/<machine>/, page regenerated
+  python -m benchmarks.accuracy --long          # one row per (group, op, dtype, regime)
+  python -m benchmarks.accuracy --worst         # also list the worst input of each failing cell
+  python -m benchmarks.accuracy --samples 16 --groups SE3 --json out.json
+  python -m benchmarks.accuracy --groups Sim3 --no-jaxlie   # Sim3's tables alone
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
-import json
-import os
 import platform
 import sys
 import time
 
+import jax
 import numpy as np
-
-_REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py")):
-    sys.path.insert(0, _REPO_ROOT)  # measure the checkout's jaxlie_geo
-
-import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
-import run as _run  # noqa: E402  (benchmarks/run.py: machine_info)
-from report import add_save_arguments, save  # noqa: E402
-
+from benchmarks import common as C  # noqa: E402
+from benchmarks.report import save  # noqa: E402
 from jaxlie_geo import _mpref as M  # noqa: E402
 
 OP_TEXT = {"exp": "exp", "log": "log", "jac": "d/dx", "hess": "d²/dx²"}
@@ -277,13 +267,6 @@ def coefficient_lines() -> list:
     return lines
 
 
-def _version(name: str) -> str:
-    try:
-        return importlib.metadata.version(name)
-    except importlib.metadata.PackageNotFoundError:
-        return "?"
-
-
 def _cell(value, over) -> str:
     if value is None:
         return "–"
@@ -316,8 +299,7 @@ def main() -> int:
     ap.add_argument("--long", action="store_true", help="one row per (group, op, dtype, regime)")
     ap.add_argument("--worst", action="store_true", help="print the worst input of failing cells")
     ap.add_argument("--no-jaxlie", action="store_true")
-    ap.add_argument("--json", help="write all worst errors (and their inputs) here")
-    add_save_arguments(ap)
+    C.add_save_arguments(ap)
     args = ap.parse_args()
     groups = [g for g in args.groups.split(",") if g]
     dtypes = [d for d in args.dtypes.split(",") if d]
@@ -362,7 +344,7 @@ def main() -> int:
     names = list(libs)
     print(
         f"Worst error in ulp, {' / '.join(names)} "
-        f"(jaxlie_geo {_version('jaxlie_geo')}, jaxlie {_version('jaxlie')}, "
+        f"(jaxlie_geo {C.version_of('jaxlie_geo')}, jaxlie {C.version_of('jaxlie')}, "
         f"jax {jax.__version__}, {platform.machine()}, backend {jax.default_backend()} "
         f"({jax.devices()[0].device_kind}), {args.samples} samples per "
         f"regime and |v|, {elapsed:.0f} s). Bounds: exp, log {M.BOUNDS['exp']:g}; "
@@ -428,46 +410,26 @@ def main() -> int:
         for (name, g, op, dt, r), (e, desc, where, over) in worst.items():
             if over:
                 print(f"- {name} {g}.{OP_TEXT[op]} {dt} {r}: {M.fmt_ulp(e)} ulp {where} {desc}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(
-                [
-                    {
-                        "lib": n,
-                        "group": g,
-                        "op": op,
-                        "dtype": dt,
-                        "regime": r,
-                        "ulp": e,
-                        "where": where,
-                        "input": desc,
-                    }
-                    for (n, g, op, dt, r), (e, desc, where, _) in worst.items()
-                ],
-                f,
-                indent=1,
-            )
-    if args.save:
-        info = _run.machine_info("benchmarks/accuracy.py")
-        cells = [
-            {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e, "over": over}
-            for (n, g, op, dt, r), (e, _, _, over) in worst.items()
-            if op in M.OPS_IN_REGIME[r]
-        ]
-        data = {
-            "machine": info,
-            "samples": args.samples,
-            "libs": names,
-            "bounds": M.BOUNDS,
-            "ops": OP_TEXT,
-            "groups": groups,
-            "regimes": [{"key": r, "label": REGIME_HEAD[r]} for r in M.REGIMES],
-            "notes": NOTES,
-            "sections": sections,
-            "cells": cells,
-            "elapsed_s": elapsed,
-        }
-        save("accuracy", data, args)
+    cells = [
+        {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e, "over": over,
+         "where": where, "input": desc}
+        for (n, g, op, dt, r), (e, desc, where, over) in worst.items()
+        if op in M.OPS_IN_REGIME[r]
+    ]  # fmt: skip
+    data = {
+        "machine": C.machine_info("benchmarks.accuracy"),
+        "samples": args.samples,
+        "libs": names,
+        "bounds": M.BOUNDS,
+        "ops": OP_TEXT,
+        "groups": groups,
+        "regimes": [{"key": r, "label": REGIME_HEAD[r]} for r in M.REGIMES],
+        "notes": NOTES,
+        "sections": sections,
+        "cells": cells,
+        "elapsed_s": elapsed,
+    }
+    save("accuracy", data, args)
     return 0
 
 

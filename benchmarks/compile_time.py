@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Compile time of whole programs: jaxlie_geo against jaxlie 1.5, in the same process.
 
 ``run.py`` times the compilation of one operation at a time. A user's jitted function
@@ -16,23 +15,15 @@ compile time in ms, the minimum over ``--repeats`` interleaved repetitions, with
 JAX cache cleared before each compilation.
 
 Usage:
-  python benchmarks/compile_time.py                       # SO3 and SE3, K = 1, 4, 16
-  python benchmarks/compile_time.py --groups SE3 --chain 1,10,50 --markdown
+  python -m benchmarks.compile_time                       # SO3 and SE3, K = 1, 4, 16
+  python -m benchmarks.compile_time --groups SE3 --chain 1,10,50 --markdown
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
-
-_REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if (
-    os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
-    and _REPO_ROOT not in sys.path
-):
-    sys.path.insert(0, _REPO_ROOT)
 
 
 def program(lib, group: str, K: int, grad: bool):

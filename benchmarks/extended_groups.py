@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Speed of Sim3 and SE23 against references built from their matrices.
 
 jaxlie has neither group, so each closed form is timed against the matrix computation that
@@ -42,11 +41,11 @@ With --save the results replace raw/<machine>/extended-groups-<dtype>.json and t
 page (RESULTS.md) is regenerated (report.py).
 
 Usage:
-  python benchmarks/extended_groups.py                    # float32, N = 10^3 and 10^6
-  python benchmarks/extended_groups.py --save             # ... saved, page regenerated
-  python benchmarks/extended_groups.py --dtype float64    # float64 (enables jax x64)
-  python benchmarks/extended_groups.py --quick            # smoke test: N = 100, 3 repeats
-  python benchmarks/extended_groups.py --groups SE23 --ops exp,jac_right --sizes 1000
+  python -m benchmarks.extended_groups                    # float32, N = 10^3 and 10^6
+  python -m benchmarks.extended_groups --save             # ... saved, page regenerated
+  python -m benchmarks.extended_groups --dtype float64    # float64 (enables jax x64)
+  python -m benchmarks.extended_groups --quick            # smoke test: N = 100, 3 repeats
+  python -m benchmarks.extended_groups --groups SE23 --ops exp,jac_right --sizes 1000
 
 On a 2-core CPU the default float32 run takes 5-6 minutes, most of it in the references at
 N = 10^6 (jac_right's reference takes 20-35 s per call there, exp's ~10 s); float64 about
@@ -55,9 +54,7 @@ N = 10^6 (jac_right's reference takes 20-35 s per call there, exp's ~10 s); floa
 
 from __future__ import annotations
 
-import argparse
 import importlib
-import json
 import statistics
 import sys
 import time
@@ -65,9 +62,11 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
 from jax.scipy.linalg import expm
-from report import add_save_arguments, fmt_n, fmt_ns, save
+
+from benchmarks import common as C
+from benchmarks.common import fmt_n, fmt_ns
+from benchmarks.report import save
 
 GROUPS = ("Sim3", "SE23")
 OPS = ("exp", "log", "compose", "apply", "jac_right", "grad")
@@ -99,45 +98,14 @@ CHECKS = {
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(
-        description="Benchmark Sim3 and SE23 against matrix references (jit, interleaved).",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = C.parser(
+        "Benchmark Sim3 and SE23 against matrix references (jit, interleaved).",
+        {"groups": GROUPS, "ops": OPS},
+        sizes="1000,1000000",
+        quick="100",
+        min_repeats=3,
     )
-    p.add_argument(
-        "--sizes", default=None, help="comma-separated batch sizes (default 1000,1000000)"
-    )
-    p.add_argument("--groups", default=",".join(GROUPS), help="comma-separated subset of Sim3,SE23")
-    p.add_argument(
-        "--ops", default=",".join(OPS), help="comma-separated subset of " + ",".join(OPS)
-    )
-    p.add_argument(
-        "--repeats",
-        type=int,
-        default=None,
-        help="interleaved repetitions per case; default: automatic, 3..25 within a time "
-        "budget per case",
-    )
-    p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
-    p.add_argument("--quick", action="store_true", help="N = 100, 3 repeats (smoke test)")
-    p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
-    p.add_argument(
-        "--json",
-        default=None,
-        metavar="PATH",
-        help="also write the raw results (the --save format) to PATH",
-    )
-    p.add_argument("--seed", type=int, default=0)
-    add_save_arguments(p)
-    args = p.parse_args(argv)
-    if args.sizes is None:
-        args.sizes = "100" if args.quick else "1000,1000000"
-    args.sizes = _run.parse_sizes(p, args.sizes)
-    by_name = {g.lower(): g for g in GROUPS}
-    args.groups = _run.parse_choices(
-        p, args.groups, GROUPS, "group", lambda s: by_name.get(s.lower(), s)
-    )
-    args.ops = _run.parse_choices(p, args.ops, OPS, "op", str.lower)
-    return args
+    return C.parse(p, argv)
 
 
 # --------------------------------------------------------------------------------------
@@ -268,69 +236,6 @@ def check(G, op: str, out_ours, out_ref, xi) -> float:
 
 
 # --------------------------------------------------------------------------------------
-# Timing
-# --------------------------------------------------------------------------------------
-
-
-SLOW_CALL_S = 5.0  # a side slower than this per call gets at least 2 repetitions, not 3
-
-
-def calls_per_measurement(fn, args, first_s: float, target_s: float):
-    """(calls so that one measurement lasts about target_s, seconds per call). ``first_s``
-    is the time of a call already made; a fast function is timed again over more calls."""
-    t = first_s
-    if t < target_s / 10:
-        t = _run.run_n(fn, args, max(1, min(1000, int(target_s / 10 / max(t, 1e-9)))))
-    return max(1, int(round(target_s / max(t, 1e-9)))), t
-
-
-def available_bytes():
-    """MemAvailable from /proc/meminfo, or None where there is none."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def footprint_bytes(compiled) -> int:
-    """Arguments, output and temporaries of a compiled program (XLA's buffer assignment)."""
-    m = compiled.memory_analysis()
-    return m.argument_size_in_bytes + m.output_size_in_bytes + m.temp_size_in_bytes
-
-
-def timed_call(fn, args):
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    return out, time.perf_counter() - t0
-
-
-def measure(sides, repeats, target_s, budget_s, min_repeats):
-    """Interleaved timing of one or two (fn, args, first call's seconds) sides; returns the
-    per-call seconds of each side, one entry per repetition. Repetition i runs the sides in
-    order for even i, reversed for odd i."""
-    # Beside a slow side (a reference taking seconds per call), a fast side's measurement
-    # lasts a tenth of the slow call (up to 1 s), so that it is not a single short call.
-    target_s = max(target_s, min(1.0, 0.1 * max(first for _, _, first in sides)))
-    plan = [calls_per_measurement(fn, args, first, target_s) for fn, args, first in sides]
-    if repeats is None:
-        one = sum(k * t for k, t in plan)
-        if max(t for _, t in plan) > SLOW_CALL_S:
-            min_repeats = min(min_repeats, 2)
-        repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
-    times = [[] for _ in sides]
-    for i in range(repeats):
-        order = range(len(sides)) if i % 2 == 0 else reversed(range(len(sides)))
-        for j in order:
-            fn, args, _ = sides[j]
-            times[j].append(_run.run_n(fn, args, plan[j][0]))
-    return times
-
-
-# --------------------------------------------------------------------------------------
 # Main benchmark
 # --------------------------------------------------------------------------------------
 
@@ -344,27 +249,27 @@ def bench_case(geo, group, op, n, args, dtype, index):
     # Alternate the compile order between cases so neither side systematically goes first.
     comp_ref = None
     if f_ref is not None and index % 2 == 1:
-        c_ref, comp_ref = _run.compile_fn(f_ref, ref_in)
-    c_ours, comp_ours = _run.compile_fn(f_ours, ours_in)
+        c_ref, comp_ref = C.compile_fn(f_ref, ref_in)
+    c_ours, comp_ours = C.compile_fn(f_ours, ours_in)
     if f_ref is not None and index % 2 == 0:
-        c_ref, comp_ref = _run.compile_fn(f_ref, ref_in)
+        c_ref, comp_ref = C.compile_fn(f_ref, ref_in)
 
     # A reference that would not fit in memory is not run (SE23 jac_right at 10^6 needs
     # ~13 GB of temporaries in float32); the case then reports ours alone.
     ref_note, mem_ref = None, None
     if f_ref is not None:
-        mem_ref = footprint_bytes(c_ref)
-        avail = available_bytes()
+        mem_ref = C.footprint_bytes(c_ref)
+        avail = C.available_bytes()
         if avail is not None and mem_ref > 0.8 * avail:
             ref_note = f"not run: needs {mem_ref / 1e9:.1f} GB, {avail / 1e9:.1f} GB available"
             f_ref = c_ref = None
 
     # Warm-up executions, timed only to size the measurements; their outputs are checked.
-    out_ours, first_ours = timed_call(c_ours, ours_in)
+    out_ours, first_ours = C.timed_call(c_ours, ours_in)
     sides = [(c_ours, ours_in, first_ours)]
     out_ref = None
     if f_ref is not None:
-        out_ref, first_ref = timed_call(c_ref, ref_in)
+        out_ref, first_ref = C.timed_call(c_ref, ref_in)
         sides.append((c_ref, ref_in, first_ref))
     diff = (
         check(G, op, out_ours, out_ref, xi)
@@ -376,7 +281,7 @@ def bench_case(geo, group, op, n, args, dtype, index):
     target_s = 0.002 if args.quick else 0.01
     budget_s = 0.1 if args.quick else 1.5
     repeats = 3 if (args.quick and args.repeats is None) else args.repeats
-    times = measure(sides, repeats, target_s, budget_s, min_repeats=3)
+    times = C.measure(sides, repeats, target_s, budget_s, min_repeats=3)
 
     r = {
         "group": group,
@@ -395,11 +300,11 @@ def bench_case(geo, group, op, n, args, dtype, index):
         "reference_note": ref_note,
         "check": CHECKS[op],
         "max_rel_diff": diff,
-        "memory_ours_mb": footprint_bytes(c_ours) / 1e6,
+        "memory_ours_mb": C.footprint_bytes(c_ours) / 1e6,
         "memory_ref_mb": None if mem_ref is None else mem_ref / 1e6,
     }
     if f_ref is not None:
-        st = _run.paired_stats(times[0], times[1])
+        st = C.paired_stats(times[0], times[1])
         r.update(
             ref_ns_per_elem=st["median_b"] * 1e9 / n,
             ratio=st["ratio"],
@@ -467,7 +372,7 @@ def main(argv=None):
     dtype = jnp.float64 if args.dtype == "float64" else jnp.float32
 
     geo = importlib.import_module("jaxlie_geo")
-    info = _run.machine_info("benchmarks/extended_groups.py", dtype=args.dtype)
+    info = C.machine_info("benchmarks.extended_groups", dtype=args.dtype)
     info.pop("jaxlie", None)
     print("# Sim3 and SE23 against matrix references")
     for k, v in info.items():
@@ -502,7 +407,7 @@ def main(argv=None):
         "ratios; max rel diff = max |ours - reference| / (1 + |reference|))"
     )
     print()
-    print(_run.render(HEADER, table_rows(results), args.markdown))
+    print(C.text_table(HEADER, table_rows(results), args.markdown, left=3))
     print()
     finish(
         results,
@@ -528,12 +433,7 @@ def finish(results, args, info, elapsed, stem, label, reference):
             check = f" ({r['check']})" if "check" in r else ""
             print(f"disagreement beyond {tol:g}: {label(r)}: {r['max_rel_diff']:.3g}{check}")
     print(f"total benchmark time: {elapsed:.0f} s")
-    data = {"machine": info, "results": results, "elapsed_s": elapsed}
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, ensure_ascii=False)
-    if args.save:
-        save(stem, data, args)
+    save(stem, {"machine": info, "results": results, "elapsed_s": elapsed}, args)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Speed benchmark: jaxlie_geo's closed-form Jacobians against ``jax.jacfwd``.
 
 For every group (SO2, SE2, SO3, SE3) and every analytical Jacobian that is not constant,
@@ -42,12 +41,12 @@ With --save the results replace raw/<machine>/jacobians-<dtype>.json and the res
 (RESULTS.md) is regenerated (report.py).
 
 Usage:
-  python benchmarks/jacobians.py                    # float32, N = 10^5, all groups
-  python benchmarks/jacobians.py --save             # ... saved to raw/<machine>/, page regenerated
-  python benchmarks/jacobians.py --dtype float64    # float64 (enables jax x64)
-  python benchmarks/jacobians.py --quick            # smoke test: N = 10^3, 3 repeats
-  python benchmarks/jacobians.py --groups SE3 --cases jac_right_inv,rminus --sizes 1000,100000
-  python benchmarks/jacobians.py --markdown --json out.json
+  python -m benchmarks.jacobians                    # float32, N = 10^5, all groups
+  python -m benchmarks.jacobians --save             # ... saved to raw/<machine>/, page regenerated
+  python -m benchmarks.jacobians --dtype float64    # float64 (enables jax x64)
+  python -m benchmarks.jacobians --quick            # smoke test: N = 10^3, 3 repeats
+  python -m benchmarks.jacobians --groups SE3 --cases jac_right_inv,rminus --sizes 1000,100000
+  python -m benchmarks.jacobians --markdown --json out.json
 
 JAX_PLATFORMS is respected (e.g. JAX_PLATFORMS=cuda to run on a GPU). On a 2-core CPU a
 default run takes ~4-6 min and --quick ~2-5 min: most of it is XLA compilation (each case
@@ -58,20 +57,20 @@ Repetitions: automatic within ~1 s per case, at least 5 (--quick: 3).
 
 from __future__ import annotations
 
-import argparse
 import importlib
-import json
 import sys
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
-from report import add_save_arguments, fmt_n, geomean, save
 
-GROUPS = _run.GROUPS
-GROUP_INFO = _run.GROUP_INFO
+from benchmarks import common as C
+from benchmarks.common import GROUPS, fmt_n, geomean
+from benchmarks.common import plain_ns as fmt_ns
+from benchmarks.report import save
+from benchmarks.run import GROUP_INFO
+
 TOL = 1e-9  # float64 agreement threshold
 
 # name -> (label of our function, map differentiated by jacfwd, input kinds)
@@ -107,50 +106,15 @@ CASES = {
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(
-        description="Benchmark jaxlie_geo's closed-form Jacobians against jax.jacfwd "
-        "(jit, interleaved).",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = C.parser(
+        "Benchmark jaxlie_geo's closed-form Jacobians against jax.jacfwd (jit, interleaved; "
+        "the agreement check is always float64).",
+        {"groups": GROUPS, "cases": tuple(CASES)},
+        sizes="100000",
+        quick="1000",
+        min_repeats=7,
     )
-    p.add_argument(
-        "--sizes", default=None, help="comma-separated batch sizes (default 100000; --quick: 1000)"
-    )
-    p.add_argument(
-        "--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3"
-    )
-    p.add_argument(
-        "--cases", default=",".join(CASES), help="comma-separated subset of " + ",".join(CASES)
-    )
-    p.add_argument(
-        "--repeats",
-        type=int,
-        default=None,
-        help="interleaved repetitions per case; default: automatic, 7..25 within a time "
-        "budget per case (--quick: 3)",
-    )
-    p.add_argument(
-        "--dtype",
-        choices=("float32", "float64"),
-        default="float32",
-        help="dtype of the timed runs (the agreement check is always float64)",
-    )
-    p.add_argument("--quick", action="store_true", help="small size and few repeats (smoke test)")
-    p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
-    p.add_argument(
-        "--json",
-        default=None,
-        metavar="PATH",
-        help="also write the raw results (the --save format) to PATH",
-    )
-    p.add_argument("--seed", type=int, default=0)
-    add_save_arguments(p)
-    args = p.parse_args(argv)
-    if args.sizes is None:
-        args.sizes = "1000" if args.quick else "100000"
-    args.sizes = _run.parse_sizes(p, args.sizes)
-    args.groups = _run.parse_choices(p, args.groups, GROUPS, "group", str.upper)
-    args.cases = _run.parse_choices(p, args.cases, CASES, "case")
-    return args
+    return C.parse(p, argv)
 
 
 # --------------------------------------------------------------------------------------
@@ -352,11 +316,11 @@ def bench_case(lib, group, case, n, args, index):
     f_ad = make_autodiff(lib, group, case)
     # Alternate compile order between cases so neither side systematically goes first.
     if index % 2 == 0:
-        c_ours, comp_ours = _run.compile_fn(f_ours, inputs)
-        c_ad, comp_ad = _run.compile_fn(f_ad, inputs)
+        c_ours, comp_ours = C.compile_fn(f_ours, inputs)
+        c_ad, comp_ad = C.compile_fn(f_ad, inputs)
     else:
-        c_ad, comp_ad = _run.compile_fn(f_ad, inputs)
-        c_ours, comp_ours = _run.compile_fn(f_ours, inputs)
+        c_ad, comp_ad = C.compile_fn(f_ad, inputs)
+        c_ours, comp_ours = C.compile_fn(f_ours, inputs)
     out_ours = jax.block_until_ready(c_ours(*inputs))  # warm-up execution
     out_ad = jax.block_until_ready(c_ad(*inputs))
     dtypes = {str(x.dtype) for x in jax.tree_util.tree_leaves(out_ours)}
@@ -366,7 +330,7 @@ def bench_case(lib, group, case, n, args, index):
     target_s = 0.002 if args.quick else 0.01
     budget_s = 0.1 if args.quick else 1.0
     repeats = 3 if (args.quick and args.repeats is None) else args.repeats
-    t_ours, t_ad = _run.interleaved(
+    t_ours, t_ad = C.interleaved(
         c_ours, c_ad, inputs, repeats, target_s, budget_s, min_repeats=3 if args.quick else 5
     )
     del c_ours, c_ad, inputs
@@ -378,7 +342,7 @@ def bench_case(lib, group, case, n, args, index):
         diff = check(lib, group, case, inputs64)
         set_x64(jax, False)
 
-    st = _run.paired_stats(t_ours, t_ad)
+    st = C.paired_stats(t_ours, t_ad)
     label, mapping, _ = CASES[case]
     return {
         "group": group,
@@ -431,15 +395,6 @@ HEADER = [
 N_LEFT = 3  # left-aligned text columns
 
 
-def fmt_ns(x: float) -> str:
-    # Plain ns per element, 3 significant digits (the unit is in the column header).
-    if x >= 100:
-        return f"{x:.0f}"
-    if x >= 10:
-        return f"{x:.1f}"
-    return f"{x:.2f}"
-
-
 def table_rows(results, markdown):
     rows = []
     for r in results:
@@ -460,25 +415,6 @@ def table_rows(results, markdown):
             ]
         )
     return rows
-
-
-def render(header, rows, markdown: bool, n_left: int = N_LEFT) -> str:
-    if markdown:
-        esc = lambda c: c.replace("|", "\\|")  # noqa: E731  ("max |diff|")
-        header, rows = [esc(h) for h in header], [[esc(c) for c in r] for r in rows]
-        out = [
-            "| " + " | ".join(header) + " |",
-            "|" + "|".join("---" if i < n_left else "--:" for i in range(len(header))) + "|",
-        ]
-        return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
-    widths = [
-        max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)
-    ]
-    line = lambda cells: "  ".join(
-        c.ljust(w) if i < n_left else c.rjust(w)  # noqa: E731
-        for i, (c, w) in enumerate(zip(cells, widths))
-    )
-    return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
 
 
 def summary(results, skipped, markdown) -> str:
@@ -549,7 +485,7 @@ def main(argv=None):
     set_x64(jax, args.dtype == "float64")
 
     lib = importlib.import_module("jaxlie_geo")
-    info = _run.machine_info("benchmarks/jacobians.py", dtype=args.dtype)
+    info = C.machine_info("benchmarks.jacobians", dtype=args.dtype)
     info.pop("jaxlie", None)
     print("# jaxlie_geo closed-form Jacobians vs jax.jacfwd")
     for k, v in info.items():
@@ -594,7 +530,7 @@ def main(argv=None):
         f"float64 on the same inputs)"
     )
     print()
-    print(render(HEADER, table_rows(results, args.markdown), args.markdown))
+    print(C.text_table(HEADER, table_rows(results, args.markdown), args.markdown, left=N_LEFT))
     print()
     print(summary(results, skipped, args.markdown))
     print()
@@ -606,11 +542,7 @@ def main(argv=None):
         "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
         "elapsed_s": elapsed,
     }
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, ensure_ascii=False)
-    if args.save:
-        save(f"jacobians-{args.dtype}", data, args)
+    save(f"jacobians-{args.dtype}", data, args)
     return 0
 
 

@@ -1,8 +1,8 @@
 """Run jaxlie 1.5's own test suite against jaxlie_geo (``import jaxlie_geo as jaxlie``).
 
-    python benchmarks/jaxlie_suite.py                 # against jaxlie_geo
-    python benchmarks/jaxlie_suite.py --target jaxlie # the same harness against jaxlie itself
-    python benchmarks/jaxlie_suite.py --sdist PATH    # a jaxlie-1.5.x .tar.gz already at hand
+    python -m benchmarks.jaxlie_suite                 # against jaxlie_geo
+    python -m benchmarks.jaxlie_suite --target jaxlie # the same harness against jaxlie itself
+    python -m benchmarks.jaxlie_suite --sdist PATH    # a jaxlie-1.5.x .tar.gz already at hand
 
 Kept out of our test suite because it downloads jaxlie's source distribution from the
 package registry (``pip download jaxlie==1.5.* --no-binary :all:``). The sdist ships the

@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Matrix-valued operations and derivatives of every group, against jaxlie and against the
 cost of writing their output.
 
@@ -23,9 +22,9 @@ Time per element: the median of 5 rounds, each function calibrated to about 0.2 
 measurement, the three run in turn within a round. Compile time: trace, lower and compile.
 
 Usage:
-  python benchmarks/matrix_ops.py                       # prints the table
-  python benchmarks/matrix_ops.py --save                # raw/<machine>/matrix-ops.json, page
-  python benchmarks/matrix_ops.py --groups SE3 Sim3 --ops jlog --sizes 1000
+  python -m benchmarks.matrix_ops                       # prints the table
+  python -m benchmarks.matrix_ops --save                # raw/<machine>/matrix-ops.json, page
+  python -m benchmarks.matrix_ops --groups SE3 Sim3 --ops jlog --sizes 1000
 """
 
 from __future__ import annotations
@@ -38,10 +37,12 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
-from report import add_save_arguments, fmt_n, fmt_ns, save
 
 import jaxlie_geo
+from benchmarks import common as C
+from benchmarks import run as speed
+from benchmarks.common import fmt_n, fmt_ns
+from benchmarks.report import save
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
 OPS = ("jac_right", "jac_right_inv", "jlog", "adjoint", "grad", "from_matrix")
@@ -64,7 +65,7 @@ def make_op(lib, group: str, op: str):
         return lambda p: G(p).adjoint()
     if op == "from_matrix":
         return lambda m: G.from_matrix(m).parameters()
-    return _run.make_op(lib, group, "grad", native=True)
+    return speed.make_op(lib, group, "grad", native=True)
 
 
 def make_inputs(group: str, op: str, n: int, dtype, seed: int) -> tuple:
@@ -99,11 +100,11 @@ def write_floor(out: jax.ShapeDtypeStruct):
 
 def time_round_robin(fns: dict, args: tuple) -> dict:
     """Median seconds per call of each compiled function, measured in turn each round."""
-    calls = {k: _run.calibrate(f, args, TARGET_S) for k, f in fns.items()}
+    calls = {k: C.calibrate(f, args, TARGET_S) for k, f in fns.items()}
     times: dict = {k: [] for k in fns}
     for _ in range(ROUNDS):
         for k, f in fns.items():
-            times[k].append(_run.run_n(f, args, calls[k]))
+            times[k].append(C.run_n(f, args, calls[k]))
     return {k: statistics.median(v) for k, v in times.items()}
 
 
@@ -111,13 +112,13 @@ def bench_case(group: str, op: str, n: int, dtype, seed: int) -> dict:
     args = make_inputs(group, op, n, dtype, seed)
     ours = make_op(jaxlie_geo, group, op)
     fns, compile_s = {}, {}
-    fns["ours"], compile_s["ours"] = _run.compile_fn(ours, args)
+    fns["ours"], compile_s["ours"] = C.compile_fn(ours, args)
     out = jax.eval_shape(ours, *args)
-    fns["floor"], _ = _run.compile_fn(write_floor(out), args)
+    fns["floor"], _ = C.compile_fn(write_floor(out), args)
     if group in JAXLIE_GROUPS and op in JAXLIE_OPS:
         import jaxlie
 
-        fns["jaxlie"], compile_s["jaxlie"] = _run.compile_fn(make_op(jaxlie, group, op), args)
+        fns["jaxlie"], compile_s["jaxlie"] = C.compile_fn(make_op(jaxlie, group, op), args)
     seconds = time_round_robin(fns, args)
     ns = {k: v / n * 1e9 for k, v in seconds.items()}
     row = {
@@ -149,7 +150,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sizes", nargs="+", type=int, default=[1000, 1_000_000])
     parser.add_argument("--dtypes", nargs="+", default=["float32", "float64"])
     parser.add_argument("--seed", type=int, default=0)
-    add_save_arguments(parser)
+    C.add_save_arguments(parser)
     args = parser.parse_args(argv)
     start = time.perf_counter()
     rows = []
@@ -159,13 +160,12 @@ def main(argv=None) -> int:
                 for op in args.ops:
                     for n in args.sizes:
                         rows.append(bench_case(group, op, n, jnp.dtype(dtype), args.seed))
-    info = _run.machine_info(
-        "benchmarks/matrix_ops.py", dtype="float32, float64", jaxlie=_run.version_of("jaxlie")
+    info = C.machine_info(
+        "benchmarks.matrix_ops", dtype="float32, float64", jaxlie=C.version_of("jaxlie")
     )
     elapsed = time.perf_counter() - start
     print(f"total benchmark time: {elapsed:.0f} s")
-    if args.save:
-        save("matrix-ops", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
+    save("matrix-ops", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
     return 0
 
 

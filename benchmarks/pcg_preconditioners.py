@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Preconditioned conjugate gradients on the pose-graph normal equations, on one CPU thread.
 
 For each dataset, A = H + λI at the initial estimate (H as ``sparse_cholesky.normal_matrix``
@@ -15,8 +14,8 @@ solve after the symbolic analysis). Reported: setup and solve time (median of 3 
 run takes under 5 s), iterations, relative residual ||Ax − b|| / ||b||, and the error of x
 relative to the CHOLMOD solution. Prints a Markdown table.
 
-  python benchmarks/pcg_preconditioners.py
-  python benchmarks/pcg_preconditioners.py --datasets sphere2500 --damping 1e-5
+  python -m benchmarks.pcg_preconditioners
+  python -m benchmarks.pcg_preconditioners --datasets sphere2500 --damping 1e-5
 """
 
 from __future__ import annotations
@@ -33,7 +32,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 import scipy.sparse.linalg as spla  # noqa: E402
-import sparse_cholesky as _sc  # noqa: E402  (benchmarks/; puts the repo root on sys.path)
+
+from benchmarks import sparse_cholesky as _sc  # noqa: E402
 
 
 def block_jacobi(A, k):

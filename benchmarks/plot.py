@@ -1,20 +1,19 @@
 """The figures of the results page, drawn from raw results: jaxlie_geo's speed-up over
 jaxlie, and pose-graph cost against time beside GTSAM.
 
-A leaf module: ``report.py`` calls it whenever it regenerates the page, and passes the groups,
-operations and labels it uses, so that this module imports nothing of the others. Speed-up:
+``report.py`` calls it whenever it regenerates the page (imported there only then:
+matplotlib is optional); it takes the groups, operations and labels from ``common``. Speed-up:
 one panel per group, with the median speed-up and its inter-quartile range per operation and
 batch size N; float32 is drawn with filled markers, float64 with hollow ones. From the
 command line, through ``report.py``::
 
-    python benchmarks/report.py                        # the page and its figures
-    python benchmarks/report.py --plot h100.png benchmarks/raw/gpu-*/speed-*.json
+    python -m benchmarks.report                        # the page and its figures
+    python -m benchmarks.report --plot h100.png benchmarks/raw/gpu-*/speed-*.json
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable, Sequence
 
 import matplotlib
 
@@ -23,22 +22,15 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import FixedLocator, NullLocator  # noqa: E402
 
+from benchmarks.common import GROUPS, OPS, label, pretty_n  # noqa: E402
+
 SIZE_COLORS = ("#4c72b0", "#dd8452", "#55a868", "#8172b3")
 SHAPES = ("o", "s", "^", "D")
 
 
-def plot(
-    runs: list,
-    out: Path,
-    groups: Sequence[str],
-    ops: Sequence[str],
-    label: Callable[[dict], str],
-    pretty_n: Callable[[int], str],
-) -> None:
+def plot(runs: list, out: Path) -> None:
     """Draw the speed runs (raw ``speed-*.json`` contents) into the PNG ``out``: a panel for
-    each of the four ``groups``, the operations ``ops`` along it; ``label`` names a run's
-    machine, ``pretty_n`` a batch size."""
-    GROUPS, OPS = list(groups), list(ops)
+    each group, the operations along it."""
     sizes = sorted({r["n"] for run in runs for r in run["results"]})
     machines = list(dict.fromkeys(label(run["machine"]) for run in runs))
     fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharey=True)

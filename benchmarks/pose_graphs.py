@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Pose graphs: ``jaxlie_geo.pose_graph.solve`` beside GTSAM's Levenberg–Marquardt.
 
 The public datasets that ship in the ``gtsam`` wheel (``gtsam.findExampleDataFile``):
@@ -31,9 +30,9 @@ swapped: GTSAM's own ``load3D`` puts the first 3 × 3 block of a TORO ``EDGE3`` 
 rotation, where TORO and HOG-Man put translation first.
 
 Usage:
-  python benchmarks/pose_graphs.py                 # print the table
-  python benchmarks/pose_graphs.py --save          # and replace this machine's raw file
-  python benchmarks/pose_graphs.py --datasets w10000 sphere2500
+  python -m benchmarks.pose_graphs                 # print the table
+  python -m benchmarks.pose_graphs --save          # and replace this machine's raw file
+  python -m benchmarks.pose_graphs --datasets w10000 sphere2500
 """
 
 from __future__ import annotations
@@ -44,9 +43,9 @@ import sys
 import time
 
 import numpy as np
-import run as _run  # benchmarks/run.py: machine facts; also puts the repo root on sys.path
-from report import add_save_arguments, save
 
+from benchmarks import common as C
+from benchmarks.report import save
 from jaxlie_geo import pose_graph
 
 #: name: (file in gtsam's data folder, read's keyword arguments, swap the 3D blocks)
@@ -219,25 +218,24 @@ def run_dataset(name: str, gtsam_module) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--datasets", nargs="+", choices=list(DATASETS), default=list(DATASETS))
-    add_save_arguments(parser)
+    C.add_save_arguments(parser)
     args = parser.parse_args(argv)
     import gtsam
 
     # The machine and the tree as the run starts (an edit during the run is not measured).
-    info = _run.machine_info(
-        "benchmarks/pose_graphs.py",
+    info = C.machine_info(
+        "benchmarks.pose_graphs",
         dtype="float64",
-        gtsam=_run.version_of("gtsam"),
-        qdldl=_run.version_of("qdldl"),
-        cvxopt=_run.version_of("cvxopt"),
+        gtsam=C.version_of("gtsam"),
+        qdldl=C.version_of("qdldl"),
+        cvxopt=C.version_of("cvxopt"),
         linear_solver=_linear_solver(),
     )
     start = time.perf_counter()
     rows = [run_dataset(name, gtsam) for name in args.datasets]
     elapsed = time.perf_counter() - start
     print(f"total benchmark time: {elapsed:.0f} s")
-    if args.save:
-        save("pose-graphs", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
+    save("pose-graphs", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
     return 0
 
 

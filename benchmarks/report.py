@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Render ``benchmarks/RESULTS.md`` and ``benchmarks/results.png`` from the raw results.
 
 The raw results are JSON files, one per machine and table::
@@ -18,14 +17,14 @@ The raw results are JSON files, one per machine and table::
                                                      it beside today's run, before/after
 
 Each benchmark script, given ``--save``, replaces its file for the machine it runs on and
-calls ``write_page``; ``python benchmarks/report.py`` re-renders the page alone. The page
+calls ``write_page``; ``python -m benchmarks.report`` re-renders the page alone. The page
 depends on the raw files only (no clock, no environment), so rendering twice gives the same
 bytes; ``--check`` exits with status 1 when the committed page is out of date.
 
 Usage:
-  python benchmarks/report.py                  # raw/ -> RESULTS.md and results.png
-  python benchmarks/report.py --check          # is RESULTS.md what raw/ renders to?
-  python benchmarks/report.py --raw-dir /tmp/raw --page /tmp/RESULTS.md
+  python -m benchmarks.report                  # raw/ -> RESULTS.md and results.png
+  python -m benchmarks.report --check          # is RESULTS.md what raw/ renders to?
+  python -m benchmarks.report --raw-dir /tmp/raw --page /tmp/RESULTS.md
 """
 
 from __future__ import annotations
@@ -37,150 +36,21 @@ import re
 import sys
 from pathlib import Path
 
+from benchmarks import common as C
+from benchmarks.common import GROUPS, OPS, fmt_ns, geomean, label, pretty_n, table
 from jaxlie_geo._mpref import fmt_ulp
 
-HERE = Path(__file__).resolve().parent
-RAW_DIR = HERE / "raw"
-PAGE = HERE / "RESULTS.md"
 PLOT_NAME = "results.png"
 POSE_GRAPH_PLOT = "pose_graphs.png"
 
-GROUPS = ("SO2", "SE2", "SO3", "SE3")
-OPS = ("exp", "log", "compose", "apply", "inverse", "interpolate", "grad")
-SUPERSCRIPT = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
 
-
-# --------------------------------------------------------------------------------------
-# Formatting (shared with run.py)
-# --------------------------------------------------------------------------------------
-
-
-def fmt_ns(x: float) -> str:
-    """A time in ns with its unit, three significant digits."""
-    if x >= 1e6:
-        return f"{x / 1e6:.2f} ms"
-    if x >= 1e3:
-        return f"{x / 1e3:.2f} µs"
-    if x >= 100:
-        return f"{x:.0f} ns"
-    if x >= 10:
-        return f"{x:.1f} ns"
-    if x >= 1:
-        return f"{x:.2f} ns"
-    return f"{x:.3g} ns"  # a GPU at 10^6: 0.1 ns/element needs three significant digits
-
-
-def fmt_n(n: int) -> str:
-    """A batch size as ``10^k`` when it is a power of ten from 1000 up."""
-    e = math.log10(n) if n > 0 else 0
-    if n >= 1000 and abs(e - round(e)) < 1e-9:
-        return f"10^{int(round(e))}"
-    return str(n)
-
-
-def pretty_n(n: int) -> str:
-    """``fmt_n`` with a superscript exponent (10³)."""
-    text = fmt_n(n)
-    if "^" in text:
-        base, exp = text.split("^")
-        return base + exp.translate(SUPERSCRIPT)
-    return text
-
-
-def geomean(xs) -> float:
-    xs = [x for x in xs if x > 0]
-    return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else float("nan")
-
-
-def table(header, rows, align) -> list:
-    """Markdown table lines; ``align`` is one of "l"/"r" per column."""
-    out = [
-        "| " + " | ".join(header) + " |",
-        "|" + "|".join("---" if a == "l" else "--:" for a in align) + "|",
-    ]
-    return out + ["| " + " | ".join(r) + " |" for r in rows]
-
-
-# --------------------------------------------------------------------------------------
-# Raw files
-# --------------------------------------------------------------------------------------
-
-
-def _slug(text: str) -> str:
-    text = re.sub(r"\((r|tm)\)", "", text.lower())
-    text = re.sub(r"\b(processor|cpu)\b|@.*$", "", text)
-    return re.sub(r"[^a-z0-9]+", "-", text).strip("-")
-
-
-def machine_name(info: dict) -> str:
-    """A stable name for the machine of a run: ``cpu-<model>-<k>core``, or
-    ``cpu-<model>-<k>of<n>core`` for a run pinned to k of n cores, or ``gpu-<device kind>``."""
-    if info.get("backend", "cpu") != "cpu":
-        return f"{info['backend']}-{_slug(info.get('device_kind', 'unknown'))}"
-    used, total = info.get("cores_usable", "?"), info.get("cores", "?")
-    cores = f"{used}core" if used == total else f"{used}of{total}core"
-    return f"cpu-{_slug(info.get('cpu', 'unknown'))}-{cores}"
-
-
-def add_save_arguments(p: argparse.ArgumentParser) -> None:
-    """``--save`` and the options that say where it writes."""
-    p.add_argument(
-        "--save",
-        action="store_true",
-        help="write the results to raw/<machine>/ and regenerate RESULTS.md and its plot",
-    )
-    p.add_argument(
-        "--machine",
-        default=None,
-        help="machine name for --save (default: derived from the CPU or GPU model)",
-    )
-    p.add_argument(
-        "--note",
-        default=None,
-        help="free text about the machine shown on the results page (default: the "
-        "note already saved for the machine)",
-    )
-    p.add_argument(
-        "--raw-dir", type=Path, default=RAW_DIR, help="raw results folder (default: %(default)s)"
-    )
-    p.add_argument(
-        "--page",
-        type=Path,
-        default=PAGE,
-        help="results page to regenerate (default: %(default)s); the plot goes beside it",
-    )
-
-
-def save(kind: str, data: dict, args) -> Path:
-    """Write ``data`` to ``<raw-dir>/<machine>/<kind>.json`` and regenerate the page."""
-    machine = args.machine or machine_name(data["machine"])
-    path = Path(args.raw_dir) / machine / f"{kind}.json"
-    note = args.note
-    if note is None:
-        note = next((m.get("note") for m in _machines_in(path.parent) if m.get("note")), None)
-    if note:
-        data["machine"]["note"] = note
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
-    print(f"wrote {path}")
-    write_page(Path(args.raw_dir), Path(args.page))
+def save(kind: str, data: dict, args) -> Path | None:
+    """Write ``data`` where the script's options say (``common.write_raw``: ``--json``,
+    ``--save``) and, with ``--save``, regenerate the page from every raw file."""
+    path = C.write_raw(kind, data, args)
+    if path is not None:
+        write_page(Path(args.raw_dir), Path(args.page))
     return path
-
-
-def _read(path: Path) -> dict:
-    return json.loads(path.read_text(encoding="utf-8"))
-
-
-def _machines_in(folder: Path) -> list:
-    return [_read(f)["machine"] for f in sorted(folder.glob("*.json"))]
-
-
-def load(raw_dir: Path) -> dict:
-    """{machine: {kind: data}} for every raw file."""
-    raw: dict = {}
-    for path in sorted(raw_dir.glob("*/*.json")):
-        raw.setdefault(path.parent.name, {})[path.stem] = _read(path)
-    return raw
 
 
 def _date(info: dict) -> str:
@@ -222,20 +92,6 @@ def machine_order(raw: dict) -> list:
     order.sort(key=newest, reverse=True)
     order.sort(key=gpu)
     return order
-
-
-def _cpu_name(info: dict) -> str:
-    cpu = re.sub(r"\((R|TM)\)|\bProcessor\b|\bCPU\b", "", info.get("cpu", "CPU"))
-    return re.sub(r"\s+", " ", cpu).strip()
-
-
-def label(info: dict) -> str:
-    """Short human name of a machine: CPU model and cores, or the GPU model."""
-    if info.get("backend", "cpu") != "cpu":
-        return info.get("device_kind", info["backend"].upper())
-    used, total = info.get("cores_usable"), info.get("cores")
-    cores = f"{used} cores" if used == total else f"{used} of {total} cores"
-    return f"{_cpu_name(info)}, {cores}"
 
 
 def _os(info: dict) -> str:
@@ -364,7 +220,7 @@ def machines_section(raw: dict, order: list) -> list:
         info = infos.get("speed-float32") or next(iter(infos.values()))
         hw = label(info)
         if info.get("backend", "cpu") != "cpu":
-            hw += f"; host {_cpu_name(info)}, {info.get('cores')} cores"
+            hw += f"; host {C.cpu_name(info)}, {info.get('cores')} cores"
         if info.get("note"):
             hw += f". {info['note']}"
         soft = []
@@ -510,7 +366,7 @@ def _speed_notes(data: dict) -> list:
 def pretty_n_pow2(n: int) -> str:
     """2²² for a power of two above 8, else ``pretty_n``."""
     k = round(math.log2(n)) if n > 0 else 0
-    return f"2{str(k).translate(SUPERSCRIPT)}" if n == 2**k and k > 3 else pretty_n(n)
+    return f"2{str(k).translate(C.SUPERSCRIPT)}" if n == 2**k and k > 3 else pretty_n(n)
 
 
 JAC_ORDER = (
@@ -556,8 +412,8 @@ def _jacobian_table(data: dict) -> list:
                 r = by.get((g, c))
                 if r:
                     row.append(
-                        f"{r['ratio']:.2f} ({_plain_ns(r['ours_ns_per_elem'])} / "
-                        f"{_plain_ns(r['jacfwd_ns_per_elem'])} ns)"
+                        f"{r['ratio']:.2f} ({C.plain_ns(r['ours_ns_per_elem'])} / "
+                        f"{C.plain_ns(r['jacfwd_ns_per_elem'])} ns)"
                     )
                 else:
                     row.append("constant" if (g, c) in skipped else "")
@@ -972,10 +828,6 @@ def _matrix_ops_table(info: dict, dtype: str, rows: list) -> list:
     return lines + table(header, body, align) + [""]
 
 
-def _plain_ns(x: float) -> str:
-    return f"{x:.0f}" if x >= 100 else f"{x:.1f}" if x >= 10 else f"{x:.2f}"
-
-
 def accuracy_section(raw: dict, order: list) -> list:
     found = [raw[m]["accuracy"] for m in order if "accuracy" in raw[m]]
     if not found:
@@ -1225,17 +1077,17 @@ def plotted_runs(raw: dict, order: list) -> list:
     return []
 
 
-def write_page(raw_dir: Path = RAW_DIR, page: Path = PAGE, plot: bool = True) -> None:
+def write_page(raw_dir: Path = C.RAW_DIR, page: Path = C.PAGE, plot: bool = True) -> None:
     """Render ``page`` (and the plot beside it) from the raw files in ``raw_dir``."""
-    raw = load(raw_dir)
+    raw = C.load(raw_dir)
     runs = plotted_runs(raw, machine_order(raw))
     if plot and runs:
         try:
-            import plot as _plot  # benchmarks/plot.py: matplotlib is optional
+            from benchmarks import plot as _plot  # matplotlib is optional
         except ImportError as e:
             print(f"plot not redrawn ({e})", file=sys.stderr)
         else:
-            _plot.plot(runs, page.parent / PLOT_NAME, GROUPS, OPS, label, pretty_n)
+            _plot.plot(runs, page.parent / PLOT_NAME)
             graphs = [raw[m]["pose-graphs"] for m in machine_order(raw) if "pose-graphs" in raw[m]]
             if graphs:
                 machine = label(graphs[0]["machine"])
@@ -1247,9 +1099,11 @@ def write_page(raw_dir: Path = RAW_DIR, page: Path = PAGE, plot: bool = True) ->
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
-        "--raw-dir", type=Path, default=RAW_DIR, help="raw results (default: %(default)s)"
+        "--raw-dir", type=Path, default=C.RAW_DIR, help="raw results (default: %(default)s)"
     )
-    ap.add_argument("--page", type=Path, default=PAGE, help="page to write (default: %(default)s)")
+    ap.add_argument(
+        "--page", type=Path, default=C.PAGE, help="page to write (default: %(default)s)"
+    )
     ap.add_argument("--no-plot", action="store_true", help="leave the plot as it is")
     ap.add_argument(
         "--plot",
@@ -1265,20 +1119,19 @@ def main(argv=None) -> int:
     )
     args = ap.parse_args(argv)
     if args.plot:
-        import plot as _plot  # benchmarks/plot.py: needs matplotlib
+        from benchmarks import plot as _plot  # needs matplotlib
 
         runs = [json.loads(f.read_text(encoding="utf-8")) for f in args.files]
         if not runs:
-            raw = load(args.raw_dir)
+            raw = C.load(args.raw_dir)
             runs = plotted_runs(raw, machine_order(raw))
-        _plot.plot(runs, args.plot, GROUPS, OPS, label, pretty_n)
-        print(f"wrote {args.plot}")
+        _plot.plot(runs, args.plot)
         return 0
     if args.check:
-        text = render(load(args.raw_dir), PLOT_NAME)
+        text = render(C.load(args.raw_dir), PLOT_NAME)
         current = args.page.read_text(encoding="utf-8") if args.page.exists() else ""
         if text != current:
-            print(f"{args.page} is out of date: run python benchmarks/report.py", file=sys.stderr)
+            print(f"{args.page} is out of date: run python -m benchmarks.report", file=sys.stderr)
             return 1
         print(f"{args.page} is up to date")
         return 0

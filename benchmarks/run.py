@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Speed benchmark: jaxlie_geo against jaxlie 1.5, in the same process.
 
 For every group (SO2, SE2, SO3, SE3), every op and every batch size, both
@@ -25,43 +24,26 @@ With --save the results replace raw/<machine>/speed-<dtype>.json and the results
 (RESULTS.md, results.png) is regenerated from the raw files (report.py).
 
 Usage:
-  python benchmarks/run.py                      # full default run (float32), printed
-  python benchmarks/run.py --save               # ... saved to raw/<machine>/, page regenerated
-  python benchmarks/run.py --dtype float64      # float64 (enables jax x64)
-  python benchmarks/run.py --quick              # smoke test, small sizes
-  python benchmarks/run.py --groups SE3 --ops exp,log --sizes 1,1000 --markdown
+  python -m benchmarks.run                      # full default run (float32), printed
+  python -m benchmarks.run --save               # ... saved to raw/<machine>/, page regenerated
+  python -m benchmarks.run --dtype float64      # float64 (enables jax x64)
+  python -m benchmarks.run --quick              # smoke test, small sizes
+  python -m benchmarks.run --groups SE3 --ops exp,log --sizes 1,1000 --markdown
 """
 
 from __future__ import annotations
 
-import argparse
-import datetime
 import importlib
-import importlib.metadata
-import json
-import os
-import platform
-import statistics
-import subprocess
 import sys
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from report import add_save_arguments, fmt_n, fmt_ns, geomean, memory_rows, save
 
-# Benchmark the checkout's jaxlie_geo (works with or without an install, and with a stale
-# editable install that predates jaxlie_geo/__init__.py).
-_REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if (
-    os.path.exists(os.path.join(_REPO_ROOT, "jaxlie_geo", "__init__.py"))
-    and _REPO_ROOT not in sys.path
-):
-    sys.path.insert(0, _REPO_ROOT)
-
-GROUPS = ("SO2", "SE2", "SO3", "SE3")
-OPS = ("exp", "log", "compose", "apply", "inverse", "interpolate", "grad")
+from benchmarks import common as C
+from benchmarks.common import GROUPS, OPS, fmt_n, fmt_ns, geomean
+from benchmarks.report import memory_rows, save
 
 # Tangent layout per group: (tangent_dim, indices of rotation part, space_dim)
 GROUP_INFO = {
@@ -73,36 +55,12 @@ GROUP_INFO = {
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(
-        description="Benchmark jaxlie_geo against jaxlie (same process, interleaved, jit).",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument(
-        "--sizes",
-        default=None,
-        help="comma-separated batch sizes (default 1,1000,1000000; --quick: 1,100)",
-    )
-    p.add_argument(
-        "--groups", default=",".join(GROUPS), help="comma-separated subset of SO2,SE2,SO3,SE3"
-    )
-    p.add_argument(
-        "--ops", default=",".join(OPS), help="comma-separated subset of " + ",".join(OPS)
-    )
-    p.add_argument(
-        "--repeats",
-        type=int,
-        default=None,
-        help="interleaved repetitions per (group, op, size); default: automatic, "
-        "5..25 within a time budget per case",
-    )
-    p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
-    p.add_argument("--quick", action="store_true", help="small sizes and few repeats (smoke test)")
-    p.add_argument("--markdown", action="store_true", help="print the result tables as markdown")
-    p.add_argument(
-        "--json",
-        default=None,
-        metavar="PATH",
-        help="also write the raw results (the --save format) to PATH",
+    p = C.parser(
+        "Benchmark jaxlie_geo against jaxlie (same process, interleaved, jit).",
+        {"groups": GROUPS, "ops": OPS},
+        sizes="1,1000,1000000",
+        quick="1,100",
+        min_repeats=7,
     )
     p.add_argument(
         "--no-eager", action="store_true", help="skip the eager SE3.exp latency measurement"
@@ -119,125 +77,10 @@ def parse_args(argv=None):
         help="module benchmarked against jaxlie (default jaxlie_geo; 'jaxlie' gives an "
         "A/A run that calibrates the harness: all ratios should be ~1)",
     )
-    p.add_argument("--seed", type=int, default=0)
-    add_save_arguments(p)
-    args = p.parse_args(argv)
-
-    if args.sizes is None:
-        args.sizes = "1,100" if args.quick else "1,1000,1000000"
-    args.sizes = parse_sizes(p, args.sizes)
-    args.groups = parse_choices(p, args.groups, GROUPS, "group", str.upper)
-    args.ops = parse_choices(p, args.ops, OPS, "op", str.lower)
+    args = C.parse(p, argv)
     if args.save and args.candidate != "jaxlie_geo":
         p.error("--save records jaxlie_geo's results; an A/A run (--candidate) is not saved")
     return args
-
-
-def parse_sizes(p, text: str) -> list:
-    """Comma-separated batch sizes ("1,1e3") -> ints >= 1 (argparse error otherwise)."""
-    sizes = [int(float(s)) for s in text.split(",") if s.strip()]
-    if any(n < 1 for n in sizes):
-        p.error("sizes must be >= 1")
-    return sizes
-
-
-def parse_choices(p, text: str, choices, what: str, norm=lambda x: x) -> list:
-    """Comma-separated names, normalised by ``norm``, each one of ``choices``."""
-    items = [norm(x.strip()) for x in text.split(",") if x.strip()]
-    for x in items:
-        if x not in choices:
-            p.error(f"unknown {what} {x!r}; choose from {tuple(choices)}")
-    return items
-
-
-# --------------------------------------------------------------------------------------
-# Machine / version info
-# --------------------------------------------------------------------------------------
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def version_of(dist: str) -> str:
-    try:
-        return importlib.metadata.version(dist)
-    except importlib.metadata.PackageNotFoundError:
-        return "not installed"
-
-
-#: What the scripts themselves write: a tree that differs from its commit only there is clean.
-RESULT_FILES = ("benchmarks/raw/", "benchmarks/RESULTS.md", "benchmarks/results.png",
-                "benchmarks/pose_graphs.png")  # fmt: skip
-
-
-def git_commit() -> str:
-    """The checkout's commit, with ``-dirty`` when ``dirty_files`` names any file."""
-    try:
-        out = subprocess.run(
-            ["git", "-C", _REPO_ROOT, "rev-parse", "--short=7", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        commit = out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return commit + "-dirty" if dirty_files() else commit
-
-
-def dirty_files() -> list:
-    """The tracked files that differ from the commit (``git status``), so that a page
-    rendered from a run of a modified tree says which files differed. The benchmark results
-    (``RESULT_FILES``) are not counted: one script's run may follow another's ``--save``."""
-    try:
-        out = subprocess.run(
-            ["git", "-C", _REPO_ROOT, "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        files = (line[3:].strip() for line in out.stdout.splitlines() if line.strip())
-        return sorted(f for f in files if not f.startswith(RESULT_FILES))
-    except (OSError, subprocess.SubprocessError):
-        return []
-
-
-def machine_info(command: str, **run) -> dict:
-    """The machine and the versions a run used (the ``machine`` entry of a raw file), then
-    the run's own fields (dtype, ...) and its command line."""
-    try:
-        affinity = len(os.sched_getaffinity(0))
-    except AttributeError:
-        affinity = os.cpu_count()
-    geo = importlib.import_module("jaxlie_geo")
-    return {
-        "date": datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z"),
-        "cpu": cpu_model(),
-        "cores": os.cpu_count(),
-        "cores_usable": affinity,
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "jax": version_of("jax"),
-        "jaxlib": version_of("jaxlib"),
-        "jaxlie": version_of("jaxlie"),
-        "jaxlie_geo": getattr(geo, "__version__", version_of("jaxlie_geo")),
-        "commit": git_commit(),
-        "dirty_files": dirty_files(),
-        "numpy": version_of("numpy"),
-        "backend": jax.default_backend(),
-        "devices": ", ".join(str(d) for d in jax.devices()),
-        "device_kind": jax.devices()[0].device_kind,
-        **run,
-        "command": " ".join(["python", command, *sys.argv[1:]]),
-    }
 
 
 # --------------------------------------------------------------------------------------
@@ -330,82 +173,6 @@ def make_inputs(group: str, op: str, n: int, dtype, seed: int, ref_lib):
 
 
 # --------------------------------------------------------------------------------------
-# Timing
-# --------------------------------------------------------------------------------------
-
-
-def compile_fn(fn, args):
-    """Trace + lower + compile; returns (compiled, seconds)."""
-
-    t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(*args).compile()
-    return compiled, time.perf_counter() - t0
-
-
-def run_n(fn, args, n: int) -> float:
-    """Mean seconds per call over n blocking calls."""
-
-    bur = jax.block_until_ready
-    t0 = time.perf_counter()
-    for _ in range(n):
-        bur(fn(*args))
-    return (time.perf_counter() - t0) / n
-
-
-def calibrate(fn, args, target_s: float) -> int:
-    """Number of calls so that one measurement lasts about target_s."""
-    t = run_n(fn, args, 1)
-    if t < target_s / 10:
-        t = run_n(fn, args, max(1, min(1000, int(target_s / 10 / max(t, 1e-9)))))
-    return max(1, int(round(target_s / max(t, 1e-9))))
-
-
-def interleaved(fn_a, fn_b, args, repeats, target_s, budget_s, min_repeats=7):
-    """Interleaved A/B timing; returns (per-call seconds lists for A and B).
-
-    Repetition i runs A then B for even i and B then A for odd i.
-    If repeats is None it is chosen within [min_repeats, 25] to fit roughly budget_s.
-    """
-    n_a = calibrate(fn_a, args, target_s)
-    n_b = calibrate(fn_b, args, target_s)
-    if repeats is None:
-        one = run_n(fn_a, args, n_a) * n_a + run_n(fn_b, args, n_b) * n_b
-        repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
-    ta, tb = [], []
-    for i in range(repeats):
-        if i % 2 == 0:
-            ta.append(run_n(fn_a, args, n_a))
-            tb.append(run_n(fn_b, args, n_b))
-        else:
-            tb.append(run_n(fn_b, args, n_b))
-            ta.append(run_n(fn_a, args, n_a))
-    return ta, tb
-
-
-def paired_stats(t_a, t_b) -> dict:
-    """Medians of two interleaved timing series and the ratio b/a as the median of the paired
-    (same-repetition) ratios, robust to slow drift of the machine, with its quartiles."""
-    paired = [b / a for a, b in zip(t_a, t_b)]
-    q1, q3 = quantiles(paired)
-    med_a, med_b = statistics.median(t_a), statistics.median(t_b)
-    return {
-        "median_a": med_a,
-        "median_b": med_b,
-        "ratio": statistics.median(paired),
-        "ratio_q1": q1,
-        "ratio_q3": q3,
-    }
-
-
-def quantiles(xs):
-    xs = sorted(xs)
-    if len(xs) == 1:
-        return xs[0], xs[0]
-    q = statistics.quantiles(xs, n=4, method="inclusive")
-    return q[0], q[2]
-
-
-# --------------------------------------------------------------------------------------
 # Agreement check (guards against benchmarking two different computations)
 # --------------------------------------------------------------------------------------
 
@@ -444,11 +211,11 @@ def bench_case(geo, ref, native, group, op, n, args, dtype):
 
     # Alternate compile order between cases so neither side systematically goes first.
     if (GROUPS.index(group) + OPS.index(op) + args.sizes.index(n)) % 2 == 0:
-        c_geo, comp_geo = compile_fn(f_geo, inputs)
-        c_ref, comp_ref = compile_fn(f_ref, inputs)
+        c_geo, comp_geo = C.compile_fn(f_geo, inputs)
+        c_ref, comp_ref = C.compile_fn(f_ref, inputs)
     else:
-        c_ref, comp_ref = compile_fn(f_ref, inputs)
-        c_geo, comp_geo = compile_fn(f_geo, inputs)
+        c_ref, comp_ref = C.compile_fn(f_ref, inputs)
+        c_geo, comp_geo = C.compile_fn(f_geo, inputs)
 
     out_geo = jax.block_until_ready(c_geo(*inputs))  # warm-up execution
     out_ref = jax.block_until_ready(c_ref(*inputs))
@@ -458,9 +225,9 @@ def bench_case(geo, ref, native, group, op, n, args, dtype):
     target_s = 0.002 if args.quick else 0.01
     budget_s = 0.1 if args.quick else 1.5
     repeats = 3 if (args.quick and args.repeats is None) else args.repeats
-    t_geo, t_ref = interleaved(c_geo, c_ref, inputs, repeats, target_s, budget_s)
+    t_geo, t_ref = C.interleaved(c_geo, c_ref, inputs, repeats, target_s, budget_s)
 
-    st = paired_stats(t_geo, t_ref)
+    st = C.paired_stats(t_geo, t_ref)
     return {
         "group": group,
         "op": op,
@@ -489,16 +256,14 @@ def eager_latency(geo, ref, args, dtype):
         jax.block_until_ready(f_ref(xi))
     repeats = 5 if args.quick else (args.repeats or 15)
     target_s = 0.005 if args.quick else 0.03
-    t_geo, t_ref = interleaved(f_geo, f_ref, (xi,), repeats, target_s, 1.0)
-    med_geo, med_ref = statistics.median(t_geo), statistics.median(t_ref)
-    paired = [r / g for g, r in zip(t_geo, t_ref)]
-    q1, q3 = quantiles(paired)
+    t_geo, t_ref = C.interleaved(f_geo, f_ref, (xi,), repeats, target_s, 1.0)
+    st = C.paired_stats(t_geo, t_ref)
     return {
-        "geo_us": med_geo * 1e6,
-        "ref_us": med_ref * 1e6,
-        "ratio": statistics.median(paired),
-        "ratio_q1": q1,
-        "ratio_q3": q3,
+        "geo_us": st["median_a"] * 1e6,
+        "ref_us": st["median_b"] * 1e6,
+        "ratio": st["ratio"],
+        "ratio_q1": st["ratio_q1"],
+        "ratio_q3": st["ratio_q3"],
         "repeats": len(t_geo),
     }
 
@@ -568,23 +333,6 @@ HEADER = [
 ]
 
 
-def render(header, rows, markdown: bool) -> str:
-    if markdown:
-        out = [
-            "| " + " | ".join(header) + " |",
-            "|" + "|".join("---" if i < 3 else "--:" for i in range(len(header))) + "|",
-        ]
-        out += ["| " + " | ".join(r) + " |" for r in rows]
-        return "\n".join(out)
-    widths = [
-        max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)
-    ]
-    line = lambda cells: "  ".join(
-        c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
-    )
-    return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
-
-
 def summary(results, markdown: bool, eager=None) -> str:
     lines = []
     ops = [o for o in OPS if any(r["op"] == o for r in results)]
@@ -606,7 +354,7 @@ def summary(results, markdown: bool, eager=None) -> str:
         "Geometric-mean ratio jaxlie/jaxlie_geo (>1: jaxlie_geo faster), by op and by group:"
     )
     lines.append("")
-    lines.append(render_simple(header, rows, markdown))
+    lines.append(C.text_table(header, rows, markdown))
     # "slower" = median ratio below 0.95 and the whole paired-ratio IQR below 1 (A/A runs with
     # --candidate jaxlie show ~5% noise on this kind of machine for small batches).
     slower = [r for r in results if r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
@@ -650,20 +398,6 @@ def summary(results, markdown: bool, eager=None) -> str:
     return "\n".join(lines)
 
 
-def render_simple(header, rows, markdown):
-    if markdown:
-        out = [
-            "| " + " | ".join(header) + " |",
-            "|---|" + "|".join("--:" for _ in header[1:]) + "|",
-        ]
-        return "\n".join(out + ["| " + " | ".join(r) + " |" for r in rows])
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(
-        c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))
-    )
-    return "\n".join([line(header)] + [line(r) for r in rows])
-
-
 def main(argv=None):
     args = parse_args(argv)
 
@@ -675,7 +409,7 @@ def main(argv=None):
     geo = importlib.import_module(args.candidate)
     native = hasattr(geo.SO2, "interpolate")
 
-    info = machine_info("benchmarks/run.py", dtype=args.dtype, candidate=args.candidate)
+    info = C.machine_info("benchmarks.run", dtype=args.dtype, candidate=args.candidate)
     print("# jaxlie_geo vs jaxlie benchmark")
     for k, v in info.items():
         print(f"  {k:13s} {v}")
@@ -726,7 +460,7 @@ def main(argv=None):
         "IQR of those ratios)"
     )
     print()
-    print(render(HEADER, table_rows(results), args.markdown))
+    print(C.text_table(HEADER, table_rows(results), args.markdown, left=3))
     print()
     if eager is not None:
         eager_rows = [
@@ -739,7 +473,7 @@ def main(argv=None):
             ]
         ]
         print(
-            render_simple(
+            C.text_table(
                 ["case", "jaxlie_geo µs/call", "jaxlie µs/call", "ratio", "ratio IQR"],
                 eager_rows,
                 args.markdown,
@@ -755,7 +489,7 @@ def main(argv=None):
         )
         print()
         print(
-            render_simple(
+            C.text_table(
                 ["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
                 memory_rows(memory),
                 args.markdown,
@@ -771,11 +505,7 @@ def main(argv=None):
         "memory": memory,
         "elapsed_s": elapsed,
     }
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, ensure_ascii=False)
-    if args.save:
-        save(f"speed-{args.dtype}", data, args)
+    save(f"speed-{args.dtype}", data, args)
     return 0
 
 

@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """What each piece of scheduling machinery earns: every op with and without it, in one
 process, interleaved.
 
@@ -16,26 +15,22 @@ without divided by the time with: a mechanism is worth keeping in an op where it
 at least 1.3x. ``docs/design/memory-and-chunks.md`` records the decision.
 
 Usage:
-  python benchmarks/scheduling.py                       # barriers, float32 and float64
-  python benchmarks/scheduling.py --without chunks --groups SE3 --ops exp,interpolate
+  python -m benchmarks.scheduling                       # barriers, float32 and float64
+  python -m benchmarks.scheduling --without chunks --groups SE3 --ops exp,interpolate
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import os
-import sys
 
 import jax
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import run as R  # noqa: E402
-
-sys.path.insert(0, R._REPO_ROOT)
-import jaxlie_geo  # noqa: E402
-from jaxlie_geo import _batch  # noqa: E402
+import jaxlie_geo
+from benchmarks import common as C
+from benchmarks import run as R
+from jaxlie_geo import _batch
 
 
 @contextlib.contextmanager
@@ -85,15 +80,15 @@ def main(argv=None) -> None:
     p.add_argument(
         "--without", choices=("barriers", "chunks", "barriers,chunks"), default="barriers"
     )
-    p.add_argument("--groups", default=",".join(R.GROUPS))
-    p.add_argument("--ops", default=",".join(R.OPS + tuple(CHAINS)))
+    p.add_argument("--groups", default=",".join(C.GROUPS))
+    p.add_argument("--ops", default=",".join(C.OPS + tuple(CHAINS)))
     p.add_argument("--dtypes", default="float32,float64")
     p.add_argument("--n", type=float, default=1e6)
     p.add_argument("--repeats", type=int, default=9)
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     n = int(args.n)
-    print(f"jax {jax.__version__}, {R.cpu_model()}, {jax.devices()[0].device_kind}")
+    print(f"jax {jax.__version__}, {C.cpu_model()}, {jax.devices()[0].device_kind}")
     print(f"\n| group | op | dtype | shipped (ns) | without {args.without} (ns) | gain |")
     print("|---|---|---|--:|--:|--:|")
     for dtype in args.dtypes.split(","):
@@ -107,8 +102,8 @@ def main(argv=None) -> None:
                 inputs = R.make_inputs(group, like, n, np.dtype(dtype), 0, jaxlie_geo)
                 a = compiled(f, inputs, "nothing")
                 b = compiled(f, inputs, args.without)
-                ta, tb = R.interleaved(a, b, inputs, args.repeats, 0.2, 5.0)
-                s = R.paired_stats(ta, tb)
+                ta, tb = C.interleaved(a, b, inputs, args.repeats, 0.2, 5.0)
+                s = C.paired_stats(ta, tb)
                 print(
                     f"| {group} | {op} | {dtype} | {s['median_a'] / n * 1e9:.1f} "
                     f"| {s['median_b'] / n * 1e9:.1f} | {s['ratio']:.2f} "

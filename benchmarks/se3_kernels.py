@@ -9,7 +9,7 @@ inverse (§9). Both are in jaxlie_geo/_se3.py (``exp_translation``/``log_transla
 and measures their worst error beyond π (exp) and near π (log) against a float64 reference, in
 float32. The results and the choice: docs/design/se3-kernel-forms.md.
 
-    python benchmarks/se3_kernels.py [--n 1048576] [--repeats 21]
+    python -m benchmarks.se3_kernels [--n 1048576] [--repeats 21]
 """
 
 from __future__ import annotations

@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """The sparse factorisations of the pose-graph solver on each public dataset's normal matrix.
 
 For each dataset in ``gtsam``'s wheel, H + λI at the initial estimate (the matrix the
@@ -16,8 +15,8 @@ alone), with the first (analysis included) reported apart. Every solution is che
 against QDLDL's to 1e-8 relative. Prints a Markdown table; the design note
 ``docs/design/pose-graph-solver.md`` quotes it.
 
-  python benchmarks/sparse_cholesky.py
-  python benchmarks/sparse_cholesky.py --datasets sphere2500 --repeats 20
+  python -m benchmarks.sparse_cholesky
+  python -m benchmarks.sparse_cholesky --datasets sphere2500 --repeats 20
 """
 
 from __future__ import annotations
@@ -27,7 +26,8 @@ import statistics
 import time
 
 import numpy as np
-import run as _run  # benchmarks/run.py: machine facts; also puts the repo root on sys.path
+
+from benchmarks import common as C
 
 DATASETS = {
     "w10000": ("w10000", {}),
@@ -97,7 +97,7 @@ def main() -> None:
     parser.add_argument("--datasets", nargs="*", default=list(DATASETS))
     parser.add_argument("--repeats", type=int, default=10)
     args = parser.parse_args()
-    info = _run.machine_info("benchmarks/sparse_cholesky.py")
+    info = C.machine_info("benchmarks.sparse_cholesky")
     print(f"{info['cpu']}, {info['cores']} cores; jax {info['jax']}; commit {info['commit']}\n")
     methods = ("qdldl", "cholmod simplicial", "cholmod supernodal")
     print("| dataset | unknowns | nonzeros (upper) | " + " | ".join(methods) + " |")

@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Spline fits: ``jaxlie_geo.splines.fit`` with a dense and with sparse factorisations.
 
 A cubic SE(3) spline with n control points (knot spacing Δt = 0.1) is fitted to 10 noisy
@@ -24,9 +23,9 @@ how much it would need. Every solver must reach the same final cost, to 1e-9 rel
 each size.
 
 Usage:
-  python benchmarks/spline_fit.py                         # print the table
-  python benchmarks/spline_fit.py --save                  # and replace this machine's file
-  python benchmarks/spline_fit.py --sizes 100 1000 --solvers banded qdldl
+  python -m benchmarks.spline_fit                         # print the table
+  python -m benchmarks.spline_fit --save                  # and replace this machine's file
+  python -m benchmarks.spline_fit --sizes 100 1000 --solvers banded qdldl
 """
 
 from __future__ import annotations
@@ -38,8 +37,8 @@ import sys
 import time
 from pathlib import Path
 
-import run as _run  # benchmarks/run.py: machine facts; also puts the repo root on sys.path
-from report import add_save_arguments, save
+from benchmarks import common as C
+from benchmarks.report import save
 
 SIZES = (100, 1000, 10000)
 SOLVERS = ("dense", "banded", "cholmod", "qdldl")
@@ -61,13 +60,7 @@ def _proc_kib(field: str) -> int:
 
 
 def available_bytes() -> int:
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 0
+    return C.available_bytes() or 0
 
 
 def dense_bytes(n: int) -> int:
@@ -129,7 +122,8 @@ def one_case(n: int, solver: str) -> dict:
 def run_case(n: int, solver: str) -> dict:
     """``one_case`` in a fresh process, for its own peak memory."""
     out = subprocess.run(
-        [sys.executable, __file__, "--case", str(n), solver],
+        [sys.executable, "-m", "benchmarks.spline_fit", "--case", str(n), solver],
+        cwd=C.REPO_ROOT,
         capture_output=True,
         text=True,
         check=False,
@@ -150,19 +144,19 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", nargs="+", type=int, default=list(SIZES))
     p.add_argument("--solvers", nargs="+", choices=SOLVERS, default=None)
     p.add_argument("--case", nargs=2, metavar=("N", "SOLVER"), help=argparse.SUPPRESS)
-    add_save_arguments(p)
+    C.add_save_arguments(p)
     args = p.parse_args(argv)
     if args.case:
         print(json.dumps(one_case(int(args.case[0]), args.case[1])))
         return 0
     solvers = args.solvers or default_solvers()
     # The machine and the tree as the run starts (an edit during the run is not measured).
-    info = _run.machine_info(
-        "benchmarks/spline_fit.py",
+    info = C.machine_info(
+        "benchmarks.spline_fit",
         dtype="float64",
-        scipy=_run.version_of("scipy"),
-        qdldl=_run.version_of("qdldl"),
-        cvxopt=_run.version_of("cvxopt"),
+        scipy=C.version_of("scipy"),
+        qdldl=C.version_of("qdldl"),
+        cvxopt=C.version_of("cvxopt"),
         memory_available_gb=available_bytes() / 1e9,
     )
     start = time.perf_counter()
@@ -187,8 +181,7 @@ def main(argv=None) -> int:
             raise SystemExit(f"{n} control points: the solvers disagree on the cost: {costs}")
     elapsed = time.perf_counter() - start
     print(f"total benchmark time: {elapsed:.0f} s")
-    if args.save:
-        save("spline-fit", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
+    save("spline-fit", {"machine": info, "results": rows, "elapsed_s": elapsed}, args)
     return 0
 
 

@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Speed of the cumulative B-splines' closed-form derivatives and Jacobians against autodiff.
 
 One SE3 spline of 100 control points (``jaxlie_geo.splines.Spline``), degrees 3 and 5, is
@@ -54,11 +53,11 @@ With --save the results replace raw/<machine>/splines-<dtype>.json and the resul
 (RESULTS.md) is regenerated (report.py).
 
 Usage:
-  python benchmarks/splines.py                    # float32, degrees 3 and 5
-  python benchmarks/splines.py --save             # ... saved, page regenerated
-  python benchmarks/splines.py --dtype float64    # float64 (enables jax x64)
-  python benchmarks/splines.py --quick            # smoke test: N = 100, 3 repeats
-  python benchmarks/splines.py --benchmarks derivatives --degrees 3 --sizes 1000
+  python -m benchmarks.splines                    # float32, degrees 3 and 5
+  python -m benchmarks.splines --save             # ... saved, page regenerated
+  python -m benchmarks.splines --dtype float64    # float64 (enables jax x64)
+  python -m benchmarks.splines --quick            # smoke test: N = 100, 3 repeats
+  python -m benchmarks.splines --benchmarks derivatives --degrees 3 --sizes 1000
 
 Sizes: derivatives at N = 10^3 and 10^6, Jacobians at 10^3, 10^4 and 10^6 (--sizes sets both).
 On a 2-core CPU the default float32 run takes about 5 minutes, most of it in the Jacobians'
@@ -67,7 +66,6 @@ reference at N = 10^4 (~2 s per call at degree 5) and in compiling the programs 
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import statistics
 import sys
@@ -76,16 +74,10 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-import run as _run  # benchmarks/run.py: timing helpers; also puts the repo root on sys.path
-from extended_groups import (
-    available_bytes,
-    finish,
-    footprint_bytes,
-    max_rel_diff,
-    measure,
-    timed_call,
-)
-from report import add_save_arguments, fmt_n, fmt_ns
+
+from benchmarks import common as C
+from benchmarks.common import fmt_n, fmt_ns
+from benchmarks.extended_groups import finish, max_rel_diff
 
 BENCHMARKS = ("derivatives", "jacobians")
 DEGREES = (3, 5)
@@ -108,49 +100,17 @@ REFERENCES = {
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(
-        description="Benchmark the splines' derivatives and Jacobians against autodiff.",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = C.parser(
+        "Benchmark the splines' derivatives and Jacobians against autodiff.",
+        {"benchmarks": BENCHMARKS},
+        sizes=None,
+        quick="100",
+        min_repeats=3,
     )
-    p.add_argument(
-        "--sizes",
-        default=None,
-        help="comma-separated numbers of times for every benchmark (default: derivatives "
-        "1000,1000000; jacobians 1000,10000,1000000)",
-    )
-    p.add_argument(
-        "--benchmarks",
-        default=",".join(BENCHMARKS),
-        help="comma-separated subset of " + ",".join(BENCHMARKS),
-    )
-    p.add_argument(
-        "--degrees", default=",".join(map(str, DEGREES)), help="comma-separated degrees, 1 to 5"
-    )
-    p.add_argument(
-        "--repeats",
-        type=int,
-        default=None,
-        help="interleaved repetitions per case; default: automatic, 3..25 within a time "
-        "budget per case",
-    )
-    p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
-    p.add_argument("--quick", action="store_true", help="N = 100, 3 repeats (smoke test)")
-    p.add_argument("--markdown", action="store_true", help="print the result table as markdown")
-    p.add_argument(
-        "--json",
-        default=None,
-        metavar="PATH",
-        help="also write the raw results (the --save format) to PATH",
-    )
-    p.add_argument("--seed", type=int, default=0)
-    add_save_arguments(p)
-    args = p.parse_args(argv)
-    if args.quick and args.sizes is None:
-        args.sizes = "100"
-    sizes = None if args.sizes is None else _run.parse_sizes(p, args.sizes)
-    args.sizes = {b: list(sizes or SIZES[b]) for b in BENCHMARKS}
-    args.benchmarks = _run.parse_choices(p, args.benchmarks, BENCHMARKS, "benchmark", str.lower)
-    degrees = _run.parse_choices(p, args.degrees, ("1", "2", "3", "4", "5"), "degree")
+    p.add_argument("--degrees", default=",".join(map(str, DEGREES)), help="degrees, 1 to 5")
+    args = C.parse(p, argv)
+    args.sizes = {b: list(args.sizes or SIZES[b]) for b in BENCHMARKS}
+    degrees = C.parse_choices(p, args.degrees, ("1", "2", "3", "4", "5"), "degree")
     args.degrees = [int(d) for d in degrees]
     return args
 
@@ -281,8 +241,8 @@ def make_reference(geo, benchmark: str):
 def fits(compiled):
     """(footprint in bytes, None) when the program fits 80% of the available memory, else
     (footprint, note)."""
-    mem = footprint_bytes(compiled)
-    avail = available_bytes()
+    mem = C.footprint_bytes(compiled)
+    avail = C.available_bytes()
     if avail is not None and mem > 0.8 * avail:
         return mem, f"not run: needs {mem / 1e9:.1f} GB, {avail / 1e9:.1f} GB available"
     return mem, None
@@ -296,10 +256,10 @@ def bench_case(geo, benchmark, degree, n, args, dtype, index):
 
     # Alternate the compile order between cases so neither side systematically goes first.
     if index % 2 == 1:
-        c_ref, comp_ref = _run.compile_fn(f_ref, inputs)
-    c_ours, comp_ours = _run.compile_fn(f_ours, inputs)
+        c_ref, comp_ref = C.compile_fn(f_ref, inputs)
+    c_ours, comp_ours = C.compile_fn(f_ours, inputs)
     if index % 2 == 0:
-        c_ref, comp_ref = _run.compile_fn(f_ref, inputs)
+        c_ref, comp_ref = C.compile_fn(f_ref, inputs)
 
     # A side that would not fit in memory is not run (the Jacobians at 10^6).
     mem_ours, ours_note = fits(c_ours)
@@ -309,7 +269,7 @@ def bench_case(geo, benchmark, degree, n, args, dtype, index):
     sides, outs = [], []
     for c, note in ((c_ours, ours_note), (c_ref, ref_note)):
         if note is None:
-            out, first = timed_call(c, inputs)
+            out, first = C.timed_call(c, inputs)
             sides.append((c, inputs, first))
             outs.append(out)
     diff = None
@@ -322,7 +282,7 @@ def bench_case(geo, benchmark, degree, n, args, dtype, index):
         target_s = 0.002 if args.quick else 0.01
         budget_s = 0.1 if args.quick else 1.5
         repeats = 3 if (args.quick and args.repeats is None) else args.repeats
-        times = measure(sides, repeats, target_s, budget_s, min_repeats=3)
+        times = C.measure(sides, repeats, target_s, budget_s, min_repeats=3)
 
     r = {
         "benchmark": benchmark,
@@ -352,7 +312,7 @@ def bench_case(geo, benchmark, degree, n, args, dtype, index):
     if ref_note is None:
         r["ref_ns_per_elem"] = statistics.median(times[-1]) * 1e9 / n
     if ours_note is None and ref_note is None:
-        st = _run.paired_stats(times[0], times[1])
+        st = C.paired_stats(times[0], times[1])
         r.update(ratio=st["ratio"], ratio_q1=st["ratio_q1"], ratio_q3=st["ratio_q3"])
     return r
 
@@ -416,7 +376,7 @@ def main(argv=None):
 
     geo = importlib.import_module("jaxlie_geo")
     importlib.import_module("jaxlie_geo.splines")
-    info = _run.machine_info("benchmarks/splines.py", dtype=args.dtype)
+    info = C.machine_info("benchmarks.splines", dtype=args.dtype)
     info.pop("jaxlie", None)
     print("# Cumulative B-splines: closed forms against autodiff")
     for k, v in info.items():
@@ -457,7 +417,7 @@ def main(argv=None):
         "max |ours - autodiff| / (1 + |autodiff|))"
     )
     print()
-    print(_run.render(HEADER, table_rows(results), args.markdown))
+    print(C.text_table(HEADER, table_rows(results), args.markdown, left=3))
     print()
     for r in results:
         for side, key in (("ours", "ours_note"), ("autodiff", "reference_note")):

@@ -22,7 +22,7 @@ that vector; derivatives only where the angle is below π. Any non-finite value 
 float32 runs with jax_enable_x64 off (no silent promotion can hide float32 rounding) and,
 for exp and log, also with it on.
 
-`python benchmarks/accuracy.py` prints the same measurement as a table, next to jaxlie.
+`python -m benchmarks.accuracy` prints the same measurement as a table, next to jaxlie.
 """
 
 from __future__ import annotations

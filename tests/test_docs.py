@@ -260,10 +260,10 @@ def test_readme_links_resolve() -> None:
 
 
 def test_results_page_is_generated_from_the_raw_results() -> None:
-    """benchmarks/RESULTS.md is exactly what benchmarks/report.py renders from
+    """benchmarks/RESULTS.md is exactly what ``python -m benchmarks.report`` renders from
     benchmarks/raw/: nobody edits the page by hand, and a new raw result regenerates it."""
     proc = subprocess.run(
-        [sys.executable, "benchmarks/report.py", "--check"],
+        [sys.executable, "-m", "benchmarks.report", "--check"],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -275,10 +275,8 @@ def test_results_page_is_generated_from_the_raw_results() -> None:
 def test_results_page_names_the_files_of_a_modified_tree() -> None:
     """A run measured on a tree with uncommitted changes is shown as such, with the files
     that differed where the run recorded them, never as a bare ``-dirty`` commit."""
-    spec = importlib.util.spec_from_file_location("report", REPO / "benchmarks" / "report.py")
-    assert spec is not None and spec.loader is not None
-    report = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(report)
+    from benchmarks import report
+
     assert report._commit({"commit": "abc1234"}) == "abc1234"
     assert report._commit({"commit": "abc1234-dirty", "dirty_files": ["a.py", "b.py"]}) == (
         "abc1234 with uncommitted changes (`a.py`, `b.py`)"

@@ -1,5 +1,6 @@
 """The package's import structure: leaf modules import no group code, the import graph has
-no cycle, and no module imports inside a function body to hide one.
+no cycle, and no module imports inside a function body to hide one. The benchmarks package
+too has no cycle, and its shared module imports none of the scripts.
 
 Read from the source with ``ast`` (independent of Python's import machinery, which tolerates
 cycles as long as the names exist when they are read).
@@ -12,9 +13,12 @@ import inspect
 import pathlib
 from typing import Dict, Set
 
+import pytest
+
 import jaxlie_geo
 
 PACKAGE = pathlib.Path(jaxlie_geo.__file__).parent
+BENCHMARKS = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 
 LEAVES = {
     "hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_projection", "_sparse",
@@ -23,28 +27,32 @@ LEAVES = {
 """Modules with no knowledge of the group classes: the base imports them, never the reverse."""
 
 
-def _package_imports(node: ast.AST, module: str) -> Set[str]:
-    """The package modules that the import statements under ``node`` name."""
+def _package_imports(node: ast.AST, module: str, folder: pathlib.Path) -> Set[str]:
+    """The modules of the package in ``folder`` that the import statements under ``node``
+    name (``__init__`` for a name the package itself exports)."""
+    package, modules = folder.name, {p.stem for p in folder.glob("*.py")}
     out = set()
     for n in ast.walk(node):
-        if isinstance(n, ast.ImportFrom) and n.level == 1:
-            if n.module:
-                out.add(n.module.split(".")[0])
-            else:  # from . import a, b
-                out.update(a.name for a in n.names)
-        elif isinstance(n, ast.ImportFrom) and (n.module or "").startswith("jaxlie_geo"):
-            parts = (n.module or "").split(".")
-            out.add(parts[1] if len(parts) > 1 else "__init__")
+        if not isinstance(n, ast.ImportFrom):
+            continue
+        name = n.module or ""
+        if n.level == 1 and name:  # from .a import b
+            out.add(name.split(".")[0])
+        elif (n.level == 1 and not name) or (n.level == 0 and name == package):
+            # from . import a, b / from package import a, b
+            out.update(a.name if a.name in modules else "__init__" for a in n.names)
+        elif n.level == 0 and name.startswith(package + "."):
+            out.add(name.split(".")[1])
     out.discard(module)
     return out
 
 
-def _graph() -> Dict[str, Set[str]]:
+def _graph(folder: pathlib.Path = PACKAGE) -> Dict[str, Set[str]]:
     graph = {}
-    for path in PACKAGE.glob("*.py"):
+    for path in folder.glob("*.py"):
         name = path.stem
-        tree = ast.parse(path.read_text(), str(path))
-        graph[name] = _package_imports(tree, name)
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        graph[name] = _package_imports(tree, name, folder)
     return graph
 
 
@@ -56,8 +64,9 @@ def test_leaf_modules_import_only_leaves() -> None:
         assert not upward, f"{leaf} imports {sorted(upward)}"
 
 
-def test_import_graph_has_no_cycle() -> None:
-    graph = _graph()
+@pytest.mark.parametrize("folder", [PACKAGE, BENCHMARKS], ids=lambda f: f.name)
+def test_import_graph_has_no_cycle(folder: pathlib.Path) -> None:
+    graph = _graph(folder)
     done: Set[str] = set()
 
     def visit(name: str, path: tuple) -> None:
@@ -72,6 +81,17 @@ def test_import_graph_has_no_cycle() -> None:
 
     for name in sorted(graph):
         visit(name, ())
+
+
+def test_benchmarks_share_one_leaf_module() -> None:
+    """``benchmarks.common`` (machine facts, labels, timing, raw files) imports no other
+    benchmark module; the page (``report``) imports only it and the figures (``plot``)."""
+    graph = _graph(BENCHMARKS)
+    assert graph["common"] == set()
+    assert graph["plot"] == {"common"}
+    assert graph["report"] == {"common", "plot"}
+    users = {name for name, deps in graph.items() if "common" in deps}
+    assert users >= {"run", "report", "plot", "jacobians", "accuracy", "pose_graphs"}
 
 
 def test_no_import_inside_a_function() -> None:
