@@ -42,7 +42,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from benchmarks import common as C  # noqa: E402
+from benchmarks import common  # noqa: E402
 from benchmarks.report import save  # noqa: E402
 from jaxlie_geo import _mpref as M  # noqa: E402
 
@@ -299,7 +299,7 @@ def main() -> int:
     ap.add_argument("--long", action="store_true", help="one row per (group, op, dtype, regime)")
     ap.add_argument("--worst", action="store_true", help="print the worst input of failing cells")
     ap.add_argument("--no-jaxlie", action="store_true")
-    C.add_save_arguments(ap)
+    common.add_save_arguments(ap)
     args = ap.parse_args()
     groups = [g for g in args.groups.split(",") if g]
     dtypes = [d for d in args.dtypes.split(",") if d]
@@ -344,7 +344,7 @@ def main() -> int:
     names = list(libs)
     print(
         f"Worst error in ulp, {' / '.join(names)} "
-        f"(jaxlie_geo {C.version_of('jaxlie_geo')}, jaxlie {C.version_of('jaxlie')}, "
+        f"(jaxlie_geo {common.version_of('jaxlie_geo')}, jaxlie {common.version_of('jaxlie')}, "
         f"jax {jax.__version__}, {platform.machine()}, backend {jax.default_backend()} "
         f"({jax.devices()[0].device_kind}), {args.samples} samples per "
         f"regime and |v|, {elapsed:.0f} s). Bounds: exp, log {M.BOUNDS['exp']:g}; "
@@ -411,13 +411,12 @@ def main() -> int:
             if over:
                 print(f"- {name} {g}.{OP_TEXT[op]} {dt} {r}: {M.fmt_ulp(e)} ulp {where} {desc}")
     cells = [
-        {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e, "over": over,
-         "where": where, "input": desc}
-        for (n, g, op, dt, r), (e, desc, where, over) in worst.items()
+        {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e, "over": over}
+        for (n, g, op, dt, r), (e, _, _, over) in worst.items()
         if op in M.OPS_IN_REGIME[r]
     ]  # fmt: skip
     data = {
-        "machine": C.machine_info("benchmarks.accuracy"),
+        "machine": common.machine_info("benchmarks.accuracy"),
         "samples": args.samples,
         "libs": names,
         "bounds": M.BOUNDS,

@@ -1,8 +1,8 @@
 """What every benchmark script shares: the machine facts a run records, the labels and tables
 it prints, its timing loop, its common command-line options and its raw result files.
 
-A leaf of the package: it imports nothing of the other modules, and jax only inside the
-functions that time or describe a run, so that rendering the page does not load it. A script
+A leaf of the package: it imports nothing of the other modules (and jax only inside the
+functions that time or describe a run). A script
 measures, prints with the labels here and hands its results to ``report.save``, which writes
 the raw file (``write_raw``) and re-renders the page from every raw file.
 """
@@ -32,6 +32,15 @@ PAGE = HERE / "RESULTS.md"
 #: The groups and operations timed against jaxlie, in the order of the page and the plot.
 GROUPS = ("SO2", "SE2", "SO3", "SE3")
 OPS = ("exp", "log", "compose", "apply", "inverse", "interpolate", "grad")
+
+#: jaxlie's layouts: tangent dimension, the tangent's rotation slice, the dimension of the
+#: space acted on and the quaternion slice of the parameters.
+GROUP_INFO = {
+    "SO2": dict(tangent_dim=1, rot=slice(0, 1), space_dim=2, quat=None),
+    "SE2": dict(tangent_dim=3, rot=slice(2, 3), space_dim=2, quat=None),
+    "SO3": dict(tangent_dim=3, rot=slice(0, 3), space_dim=3, quat=slice(0, 4)),
+    "SE3": dict(tangent_dim=6, rot=slice(3, 6), space_dim=3, quat=slice(0, 4)),
+}
 
 
 # --------------------------------------------------------------------------------------
@@ -271,16 +280,43 @@ def calibrate(fn, args, target_s: float) -> int:
     return calls_per_measurement(fn, args, run_n(fn, args, 1), target_s)[0]
 
 
-SLOW_CALL_S = 5.0  # a side slower than this per call gets at least 2 repetitions
+def _alternate(sides, repeats: int) -> list:
+    """Seconds per call of each (fn, args, calls) side, one entry per repetition; repetition
+    i runs the sides in order for even i, reversed for odd i, so that a drift of the machine
+    hits all alike."""
+    times: list = [[] for _ in sides]
+    for i in range(repeats):
+        order = range(len(sides)) if i % 2 == 0 else reversed(range(len(sides)))
+        for j in order:
+            fn, args, calls = sides[j]
+            times[j].append(run_n(fn, args, calls))
+    return times
+
+
+def interleaved(fn_a, fn_b, args, repeats, target_s, budget_s, min_repeats=7):
+    """Interleaved timing of two functions of the same arguments, each measurement about
+    ``target_s`` long; returns (seconds per call of A, of B), one entry per repetition.
+    ``repeats=None`` chooses from ``min_repeats`` to 25 repetitions within ``budget_s``."""
+    n_a = calibrate(fn_a, args, target_s)
+    n_b = calibrate(fn_b, args, target_s)
+    if repeats is None:
+        one = run_n(fn_a, args, n_a) * n_a + run_n(fn_b, args, n_b) * n_b
+        repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
+    t_a, t_b = _alternate([(fn_a, args, n_a), (fn_b, args, n_b)], repeats)
+    return t_a, t_b
+
+
+#: A side slower than this per call lowers ``measure``'s minimum to 2 repetitions.
+SLOW_CALL_S = 5.0
 
 
 def measure(sides, repeats, target_s, budget_s, min_repeats):
-    """Interleaved timing of one or more (fn, args, first call's seconds) sides; returns the
-    per-call seconds of each side, one entry per repetition. Repetition i runs the sides in
-    order for even i, reversed for odd i, so that a drift of the machine hits all alike.
-    ``repeats=None`` chooses from ``min_repeats`` to 25 repetitions within ``budget_s``."""
-    # Beside a slow side (a reference taking seconds per call), a fast side's measurement
-    # lasts a tenth of the slow call (up to 1 s), so that it is not a single short call.
+    """Interleaved timing of one or more (fn, args, first call's seconds) sides whose calls
+    may take seconds (a matrix reference beside our kernel); returns the seconds per call of
+    each side, one entry per repetition. Beside a slow side, a measurement lasts a tenth of
+    its call (up to 1 s), so that a fast side's is not a single short call; ``repeats=None``
+    chooses from ``min_repeats`` (2 beside a side over ``SLOW_CALL_S``) to 25 repetitions
+    within ``budget_s``."""
     target_s = max(target_s, min(1.0, 0.1 * max(first for _, _, first in sides)))
     plan = [calls_per_measurement(fn, args, first, target_s) for fn, args, first in sides]
     if repeats is None:
@@ -288,19 +324,7 @@ def measure(sides, repeats, target_s, budget_s, min_repeats):
         if max(t for _, t in plan) > SLOW_CALL_S:
             min_repeats = min(min_repeats, 2)
         repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
-    times: list = [[] for _ in sides]
-    for i in range(repeats):
-        order = range(len(sides)) if i % 2 == 0 else reversed(range(len(sides)))
-        for j in order:
-            fn, args, _ = sides[j]
-            times[j].append(run_n(fn, args, plan[j][0]))
-    return times
-
-
-def interleaved(fn_a, fn_b, args, repeats, target_s, budget_s, min_repeats=7):
-    """``measure`` of two functions of the same arguments: (seconds of A, seconds of B)."""
-    sides = [(fn, args, run_n(fn, args, 1)) for fn in (fn_a, fn_b)]
-    return tuple(measure(sides, repeats, target_s, budget_s, min_repeats))
+    return _alternate([(fn, args, k) for (fn, args, _), (k, _) in zip(sides, plan)], repeats)
 
 
 def quantiles(xs):
@@ -367,19 +391,23 @@ def parse_choices(p, text: str, choices, what: str) -> list:
     return items
 
 
-def parser(description: str, choices: dict, sizes, quick: str, min_repeats: int):
+def parser(description: str, choices: dict, sizes, quick: str, min_repeats: int, sizes_text=None):
     """An argument parser with the options of the timing scripts: ``--sizes``, one option per
     entry of ``choices`` (``{"groups": GROUPS, "ops": OPS}``: ``--groups``, ``--ops``, each a
     comma-separated subset), ``--repeats``, ``--dtype``, ``--quick``, ``--markdown``,
     ``--seed`` and the saving options; ``parse`` reads it. ``sizes`` and ``quick`` are the
     default batch sizes of a full and of a ``--quick`` run (``sizes=None``: the script's
-    own)."""
+    own, which ``sizes_text`` describes)."""
     p = argparse.ArgumentParser(
-        description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="python -m benchmarks." + Path(sys.argv[0]).stem,
+        description=description,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.set_defaults(_choices=choices, _sizes=sizes, _quick=quick)
     p.add_argument(
-        "--sizes", default=None, help=f"comma-separated batch sizes (default {sizes or 'per case'})"
+        "--sizes",
+        default=None,
+        help=f"comma-separated batch sizes (default {sizes_text or sizes})",
     )
     for name, options in choices.items():
         default = ",".join(map(str, options))

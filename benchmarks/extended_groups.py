@@ -22,7 +22,7 @@ reference (exp and compose through ``as_matrix``) and, where there is none, agai
 identities log(exp ξ) = ξ and ∇Σ‖log(exp ξ)‖² = 2ξ (angles stay below π); the column
 ``max rel diff`` is max |ours − reference| / (1 + |reference|).
 
-Timing follows ``benchmarks/run.py`` (its helpers are imported): every function is jitted
+Timing (``common.measure``): every function is jitted
 and compiled ahead (trace + lower + XLA compile, reported per side), inputs are on the
 device, every call blocks until its result is ready; repetitions of the two sides are
 interleaved (ours then the reference, then the reference then ours, ...), each about 10 ms

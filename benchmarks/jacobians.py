@@ -31,7 +31,7 @@ normal. Before timing, every case is checked: the closed form and jacfwd are eva
 float64 on the same inputs and the max absolute difference is reported (column
 ``max |diff|``; > 1e-9 is flagged).
 
-Timing is that of ``benchmarks/run.py`` (imported from it): the two jit-compiled
+Timing is that of ``benchmarks/run.py`` (``common.interleaved``): the two jit-compiled
 functions are run in interleaved repetitions (A B, B A, ...), the time per element is the
 median over repetitions divided by N, and the ratio jacfwd / ours (> 1: the closed form is
 faster) is the median of the paired per-repetition ratios, with their inter-quartile
@@ -66,10 +66,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common as C
-from benchmarks.common import GROUPS, fmt_n, geomean
+from benchmarks.common import GROUP_INFO, GROUPS, fmt_n, geomean
 from benchmarks.common import plain_ns as fmt_ns
 from benchmarks.report import save
-from benchmarks.run import GROUP_INFO
 
 TOL = 1e-9  # float64 agreement threshold
 
@@ -112,7 +111,7 @@ def parse_args(argv=None):
         {"groups": GROUPS, "cases": tuple(CASES)},
         sizes="100000",
         quick="1000",
-        min_repeats=7,
+        min_repeats=5,
     )
     return C.parse(p, argv)
 

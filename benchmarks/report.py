@@ -67,7 +67,7 @@ def _factorisation(info: dict) -> str:
 
 def _commit(info: dict) -> str:
     """The commit a run measured, and the files that differed from it if the tree had
-    uncommitted changes (``run.py`` records them as ``dirty_files``)."""
+    uncommitted changes (``common.machine_info`` records them as ``dirty_files``)."""
     commit = info.get("commit", "?")
     if not commit.endswith("-dirty"):
         return commit

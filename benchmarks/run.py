@@ -42,16 +42,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common as C
-from benchmarks.common import GROUPS, OPS, fmt_n, fmt_ns, geomean
+from benchmarks.common import GROUP_INFO, GROUPS, OPS, fmt_n, fmt_ns, geomean
 from benchmarks.report import memory_rows, save
-
-# Tangent layout per group: (tangent_dim, indices of rotation part, space_dim)
-GROUP_INFO = {
-    "SO2": dict(tangent_dim=1, rot=slice(0, 1), space_dim=2, quat=None),
-    "SE2": dict(tangent_dim=3, rot=slice(2, 3), space_dim=2, quat=None),
-    "SO3": dict(tangent_dim=3, rot=slice(0, 3), space_dim=3, quat=slice(0, 4)),
-    "SE3": dict(tangent_dim=6, rot=slice(3, 6), space_dim=3, quat=slice(0, 4)),
-}
 
 
 def parse_args(argv=None):

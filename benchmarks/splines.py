@@ -104,6 +104,7 @@ def parse_args(argv=None):
         "Benchmark the splines' derivatives and Jacobians against autodiff.",
         {"benchmarks": BENCHMARKS},
         sizes=None,
+        sizes_text="derivatives 1000,1000000; jacobians 1000,10000,1000000",
         quick="100",
         min_repeats=3,
     )

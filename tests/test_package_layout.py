@@ -30,7 +30,10 @@ LEAVES = {
 def _package_imports(node: ast.AST, module: str, folder: pathlib.Path) -> Set[str]:
     """The modules of the package in ``folder`` that the import statements under ``node``
     name (``__init__`` for a name the package itself exports)."""
-    package, modules = folder.name, {p.stem for p in folder.glob("*.py")}
+    package = folder.name
+    modules = {p.stem for p in folder.glob("*.py")} | {
+        p.parent.name for p in folder.glob("*/__init__.py")
+    }
     out = set()
     for n in ast.walk(node):
         if not isinstance(n, ast.ImportFrom):
