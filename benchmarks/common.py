@@ -2,9 +2,9 @@
 it prints, its timing loop, its common command-line options and its raw result files.
 
 A leaf of the package: it imports nothing of the other modules (and jax only inside the
-functions that time or describe a run). A script
-measures, prints with the labels here and hands its results to ``report.save``, which writes
-the raw file (``write_raw``) and re-renders the page from every raw file.
+functions that time or describe a run). A script measures, prints with the labels here and
+hands its results to ``report.save``, which writes the raw file (``write_raw``) and
+re-renders the page from every raw file.
 """
 
 from __future__ import annotations

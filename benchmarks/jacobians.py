@@ -66,8 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common as C
-from benchmarks.common import GROUP_INFO, GROUPS, fmt_n, geomean
-from benchmarks.common import plain_ns as fmt_ns
+from benchmarks.common import GROUP_INFO, GROUPS, fmt_n, geomean, plain_ns
 from benchmarks.report import save
 
 TOL = 1e-9  # float64 agreement threshold
@@ -404,8 +403,8 @@ def table_rows(results, markdown):
                 code(r["jacobian"]),
                 code(r["map"]),
                 fmt_n(r["n"]),
-                fmt_ns(r["ours_ns_per_elem"]),
-                fmt_ns(r["jacfwd_ns_per_elem"]),
+                plain_ns(r["ours_ns_per_elem"]),
+                plain_ns(r["jacfwd_ns_per_elem"]),
                 f"{r['ratio']:.2f}",
                 f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
                 f"{r['max_abs_diff_float64']:.1e}",
@@ -436,8 +435,8 @@ def summary(results, skipped, markdown) -> str:
         for r in sorted(slow, key=lambda r: r["ratio"]):
             lines.append(
                 f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
-                f"ratio {r['ratio']:.2f} ({fmt_ns(r['ours_ns_per_elem'])} vs "
-                f"{fmt_ns(r['jacfwd_ns_per_elem'])} ns/elem)"
+                f"ratio {r['ratio']:.2f} ({plain_ns(r['ours_ns_per_elem'])} vs "
+                f"{plain_ns(r['jacfwd_ns_per_elem'])} ns/elem)"
             )
     else:
         lines.append("No closed form is slower than 2x jacfwd (ratio < 0.5).")
@@ -511,8 +510,8 @@ def main(argv=None):
                 results.append(r)
                 print(
                     f"{group:4s} {case:14s} N={fmt_n(n):>6s}  "
-                    f"ours {fmt_ns(r['ours_ns_per_elem']):>7s} ns/el  "
-                    f"jacfwd {fmt_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  "
+                    f"ours {plain_ns(r['ours_ns_per_elem']):>7s} ns/el  "
+                    f"jacfwd {plain_ns(r['jacfwd_ns_per_elem']):>7s} ns/el  "
                     f"ratio {r['ratio']:5.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]  "
                     f"compile {r['compile_ours_ms']:5.0f}/{r['compile_jacfwd_ms']:5.0f} ms  "
                     f"x{r['repeats']}  diff64 {r['max_abs_diff_float64']:.1e}  "

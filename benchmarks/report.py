@@ -30,7 +30,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 import sys
@@ -1121,7 +1120,7 @@ def main(argv=None) -> int:
     if args.plot:
         from benchmarks import plot as _plot  # needs matplotlib
 
-        runs = [json.loads(f.read_text(encoding="utf-8")) for f in args.files]
+        runs = [C.read_json(f) for f in args.files]
         if not runs:
             raw = C.load(args.raw_dir)
             runs = plotted_runs(raw, machine_order(raw))
