@@ -349,9 +349,12 @@ def minimise(
             break
         if method == "lm":
             lam, nu = max(lam / DAMPING_FACTOR, MIN_DAMPING), DAMPING_FACTOR
-        decrease = (current - new) / current if current > 0 else 0.0
-        x = new_x
+        # The decrease between the costs recorded at the linearisation points: at the
+        # rounding floor of a zero-residual problem the trial cost ``new`` can sit below
+        # ``current`` by a large relative amount that the linearisation does not repeat.
+        previous, x = current, new_x
         current = linear.linearise(x)
+        decrease = (previous - current) / previous if previous > 0 else 0.0
         costs.append(current)
         times.append(time.perf_counter() - start)
         if bar.enabled:
