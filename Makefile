@@ -1,11 +1,12 @@
 # Two commands for a fresh machine (see README "Quick start"):
 #   make demo   set up .venv if missing, install with the example extras, run the main example
-#   make test   set up .venv if missing, install with the test extras, lint, run the whole suite
+#   make test   set up .venv if missing, install with the test extras, lint, run the fast suite
+# and every check: make test-full (what CI runs: both suites, the docs build, the notebooks).
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo lint test bench accuracy docs clean
+.PHONY: demo lint test test-full bench accuracy docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -26,20 +27,28 @@ $(VENV)/.installed-test: pyproject.toml | $(PY)
 demo: $(VENV)/.installed-examples
 	$(PY) examples/pose_interpolation.py
 
-# ruff (lint and format, configured in pyproject.toml); `make test` fails on a lint error.
+# ruff (lint and format, configured in pyproject.toml) and the repository's rules (README
+# length, stripped notebooks: tests/check_repository.py); both suites fail on a lint error.
 lint: $(VENV)/.installed-test
 	$(PY) -m ruff check .
 	$(PY) -m ruff format --check .
+	$(PY) tests/check_repository.py
 
 # One pytest worker per core (pytest-xdist), at most 8: each is a process with its own jax
 # and compile caches; compilation dominates the suite (tests/README.md). The workers share
 # JAX's persistent compilation cache in out/jax-cache (tests/conftest.py), kept for the next
-# run. From a fresh clone on 2 cores, `make test` takes 37 to 52 minutes, pytest 36 to 50
-# (about 10,100 programs compiled, 2,900 to 4,000 s of compiling over both workers; the
-# same programs compile up to 1.4x slower from one run to the next on a shared machine);
-# the compile budget (tests/_compile_budget.py) fails a run above 12,000.
+# run, so a rerun compiles little. `make test` is the fast suite (-m "not slow"): every
+# module, group and dtype, values and first derivatives. `make test-full` adds the slow
+# checks (tests/_suites.py: the same code paths at other dtypes, degrees, grids, batch
+# shapes), the docs build and the notebooks. Each fails above its compile budget
+# (tests/_compile_budget.py). Measured from a fresh clone on 2 cores: see tests/README.md.
+PYTEST := $(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
+
 test: lint
-	$(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
+	$(PYTEST) -m "not slow"
+
+test-full: lint
+	$(PYTEST)
 
 # The benchmarks: each run replaces this machine's raw results and regenerates
 # benchmarks/RESULTS.md and its plot (benchmarks/README.md).

@@ -7,7 +7,7 @@ for all the properties that read it. A module of the numeric tier writes
 * a *program*: a pure function ``program(G, data) -> dict of arrays`` that evaluates every
   operation its properties need on the batch ``data`` (a dict of arrays and group elements);
   ``run(program, G, data)`` evaluates it (see ``run`` for how it compiles: the batch shape
-  is fixed, so every module and every Hypothesis example reuses the same compiled
+  is fixed, so every module and every seed of the random batches reuses the same compiled
   operations) and returns numpy arrays;
 * *checks*: functions ``check(G, dtype, data, out)`` registered with ``@checks.add``, each
   asserting one property of the outputs against an independent reference (numpy, scipy,

@@ -11,8 +11,8 @@
   or switches the cache off when empty. It is set through the environment, so notebook
   kernels and other subprocesses share it. A cache entry that cannot be read (a run killed
   while writing one) is compiled again, with the warning silenced.
-* Hypothesis profiles: ``dev`` (default, more examples) and ``ci`` (fewer, derandomised,
-  no deadline); ``HYPOTHESIS_PROFILE`` picks one (``.ci/run`` sets ``ci``).
+* ``SEEDS``: the fixed seeds of the checks on random inputs (``over_seeds``); the inputs
+  keep their shape from one seed to the next, so a new seed compiles nothing.
 * The harness: ``GROUPS`` lists every group once; ``over_groups_dtypes`` parametrises a
   test over group × dtype and ``over_groups`` over the groups alone (the numeric tier's
   shared batch is in ``_programs.py``). A group added to ``GROUPS`` (with its generators in
@@ -58,41 +58,24 @@ if _JAX_CACHE:  # in case a plugin imported jax first
         int(os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"]),
     )
 
+import _suites  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from hypothesis import HealthCheck, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
 
 import jaxlie_geo  # noqa: E402
 from jaxlie_geo import SE2, SE3, SE23, SO2, SO3, Sim3  # noqa: E402
 
 pytest_plugins = ["_compile_budget"]
 
-# ---------------------------------------------------------------------------------
-# Hypothesis profiles.
-
-settings.register_profile(
-    "ci",
-    max_examples=3,
-    deadline=None,
-    derandomize=True,
-    database=None,
-    print_blob=True,
-    suppress_health_check=[HealthCheck.too_slow],
-)
-settings.register_profile(
-    "dev",
-    max_examples=8,
-    deadline=None,
-    print_blob=True,
-    suppress_health_check=[HealthCheck.too_slow],
-)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
-
-
 _JAX_CACHE_MAX_BYTES = 2**31
 """Above this size the oldest cache entries are removed (down to half), as a run starts."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list) -> None:
+    """The slow checks of ``_suites.SLOW`` get ``@pytest.mark.slow`` (``make test`` runs the
+    others); a whole-suite collection also checks the list against the tests."""
+    _suites.mark(items, whole=_suites.suite(config) is not None)
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -139,6 +122,14 @@ GROUP_DTYPES = [
 
 over_groups_dtypes = pytest.mark.parametrize(("G", "dtype"), GROUP_DTYPES)
 """Parametrise over group × dtype (arguments ``G, dtype``)."""
+over_groups_float64 = pytest.mark.parametrize(
+    ("G", "dtype"),
+    [pytest.param(G, jnp.float64, id=f"{G.__name__}-float64") for G in GROUPS],
+)
+"""Parametrise over the groups in float64 alone (arguments ``G, dtype``): for the checks that
+differentiate twice or more (derivatives of Jacobians, Hessians, third derivatives), which
+run in float64 only, as jaxlie's whole suite does; float32 keeps values and first
+derivatives on every group."""
 over_groups = pytest.mark.parametrize("G", GROUPS, ids=group_name)
 """Parametrise over the groups (argument ``G``)."""
 over_dtypes = pytest.mark.parametrize("dtype", DTYPES, ids=dtype_name)
@@ -396,13 +387,11 @@ def homogeneous_apply(G: type, M: Any, p: Any) -> np.ndarray:
 # ---------------------------------------------------------------------------------
 # Random inputs.
 
-seeds = st.integers(min_value=0, max_value=2**31 - 1)
-"""Hypothesis strategy for seeds; tangents and points come from numpy's generator with
-that seed (no JAX compilation per shape), elements from ``G.sample_uniform``."""
-
-ANGLE_KINDS = ("generic", "zero", "tiny", "small", "large", "mixed")
-angle_kinds = st.sampled_from(ANGLE_KINDS)
-"""Hypothesis strategy for the regime of tangent rotation angles."""
+SEEDS = (1, 2, 3)
+"""The seeds of the checks on random inputs: tangents and points come from numpy's generator
+with the seed (no JAX compilation per draw), elements from ``G.sample_uniform``."""
+over_seeds = pytest.mark.parametrize("seed", SEEDS)
+"""Parametrise over ``SEEDS`` (argument ``seed``)."""
 
 
 def key_of(seed: int) -> jax.Array:
@@ -508,6 +497,7 @@ __all__ = [
     "EPS",
     "over_groups_dtypes",
     "over_groups",
+    "over_groups_float64",
     "over_dtypes",
     "over_se_groups",
     "over_quaternion_groups",
@@ -535,8 +525,8 @@ __all__ = [
     "logm_ref",
     "rotation_angle",
     "homogeneous_apply",
-    "seeds",
-    "angle_kinds",
+    "SEEDS",
+    "over_seeds",
     "key_of",
     "random_tangent",
     "random_element",

@@ -9,8 +9,9 @@ library's own composition (jaxlie's definition of ``jlog``) and, for ``sample_un
 Haar measure's known distributions (Kolmogorov–Smirnov tests).
 
 The batch spans every angle regime (``_programs.regime_batch``); each property is also
-checked on one unbatched element against the batched result, and a Hypothesis test runs every
-property again on random batches of the same shape (the same compiled program).
+checked on one unbatched element against the batched result, and every property runs again
+on random batches of the same shape, one per seed of ``conftest.SEEDS`` (the same compiled
+program).
 """
 
 from __future__ import annotations
@@ -32,15 +33,14 @@ from conftest import (
     homogeneous_apply,
     identity_matrices,
     over_groups_dtypes,
+    over_seeds,
     random_element,
     random_tangent,
     rotation_angle,
     rotation_params,
-    seeds,
     to_np,
     vee_ref,
 )
-from hypothesis import given
 
 from jaxlie_geo import SO2, SO3
 
@@ -460,7 +460,7 @@ def test_property(G, dtype, prop):
 
 
 @over_groups_dtypes
-@given(seed=seeds)
+@over_seeds
 def test_properties_on_random_batches(G, dtype, seed):
     """Every property on random batches of the same shape (the same compiled program)."""
     d = _prepare(G, dtype, seed)

@@ -26,12 +26,11 @@ from conftest import (
     over_dtypes,
     over_groups,
     over_groups_dtypes,
+    over_seeds,
     random_element,
     random_points,
-    seeds,
     to_np,
 )
-from hypothesis import given
 
 import jaxlie_geo
 from jaxlie_geo import SE3, _batch, _xla
@@ -41,7 +40,7 @@ from jaxlie_geo import SE3, _batch, _xla
 
 
 @over_groups_dtypes
-@given(seed=seeds)
+@over_seeds
 def test_indexing_reshape_stack(G, dtype, seed):
     """Indexing, ``reshape`` and ``stack`` act on the batch axes as NumPy does on the
     parameter array with the parameter axis kept last; an indexed element behaves like the
@@ -163,7 +162,7 @@ def test_stack_axis_counts_batch_axes(G):
 
 
 @over_groups_dtypes
-@given(seed=seeds)
+@over_seeds
 def test_batch_axes_broadcast_between_operands(G, dtype, seed):
     """Batch axes of (3, 1) and (1, 4) broadcast to (3, 4) in compose, apply and interpolate
     (numpy matrix products and explicit broadcasting as references), and in SE constructors

@@ -20,11 +20,10 @@ from conftest import (
     hat_ref,
     over_groups,
     over_groups_dtypes,
+    over_seeds,
     random_element,
-    seeds,
     to_np,
 )
-from hypothesis import given
 
 import jaxlie_geo
 
@@ -159,7 +158,7 @@ def test_property(G, dtype, prop):
 
 
 @over_groups_dtypes
-@given(seed=seeds)
+@over_seeds
 def test_properties_on_random_batches(G, dtype, seed):
     """Every property on random batches of the same shape (the same compiled operations)."""
     d = _prepare(G, dtype, seed)

@@ -8,8 +8,9 @@ system kernelspec of that name, and a probe cell appended to the in-memory copy 
 which Python ran. Then one property per notebook is read back from its outputs, so a
 notebook that runs but tells a wrong story fails too.
 
-The committed notebooks must be stripped (no outputs, no execution counts); run them in
-Jupyter to see the figures (``notebooks/README.md``).
+The committed notebooks are stripped (no outputs, no execution counts: ``make lint`` checks
+it with ``tests/check_repository.py``); run them in Jupyter to see the figures
+(``notebooks/README.md``).
 
 Needs nbformat, nbclient and ipykernel (and matplotlib, mpmath, jaxlie); a missing one is
 an import error here, i.e. a failure, never a skip.
@@ -156,21 +157,6 @@ def test_03_tour_for_jaxlie_users(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     # First-order covariance propagation within Monte Carlo noise (4000 samples).
     assert _number(r"/ \|propagate_compose\| = " + NUM, text) < 0.1
     assert images >= 1
-
-
-@pytest.mark.parametrize("name", NOTEBOOKS)
-def test_committed_notebooks_are_stripped(name: str) -> None:
-    """The committed notebook is valid, uses the python3 kernel and carries no outputs,
-    execution counts or timing metadata."""
-    nb = nbformat.read(NOTEBOOK_DIR / name, as_version=4)
-    nbformat.validate(nb)
-    assert nb.metadata.get("kernelspec", {}).get("name") == "python3"
-    code = [c for c in nb.cells if c.cell_type == "code"]
-    assert code, f"{name} has no code cells"
-    for i, cell in enumerate(code):
-        assert cell.outputs == [], f"{name}: code cell {i} has outputs"
-        assert cell.execution_count is None, f"{name}: code cell {i} has an execution count"
-        assert "execution" not in cell.metadata, f"{name}: code cell {i} has timing metadata"
 
 
 def test_every_notebook_is_tested() -> None:
