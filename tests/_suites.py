@@ -171,7 +171,10 @@ def suite(config: pytest.Config) -> str | None:
         return None
     if getattr(opt, "failedfirst", False) or getattr(opt, "deselect", None):
         return None
-    if config.args and [os.path.normpath(a) for a in config.args] != ["tests"]:
+    root = config.rootpath
+    default = {os.path.normpath(root / p) for p in config.getini("testpaths")} or {str(root)}
+    given = {os.path.normpath(os.path.abspath(a)) for a in config.args}
+    if given and given != default:  # paths or test ids chosen
         return None
     return {"": "full", "not slow": "fast"}.get(getattr(opt, "markexpr", "").strip())
 
