@@ -52,7 +52,7 @@ _CACHE = {}
 def cached_jit(key, build):
     """``jax.jit(build())``, built once per key. Eager autodiff through the library's
     jitted methods recompiles its derived computations on every call, so every derivative
-    below is jitted once per group (and reused by all hypothesis examples)."""
+    below is jitted once per group (and reused by every seed)."""
     if key not in _CACHE:
         _CACHE[key] = jax.jit(build())
     return _CACHE[key]
