@@ -179,22 +179,18 @@ def suite(config: pytest.Config) -> str | None:
     return {"": "full", "not slow": "fast"}.get(getattr(opt, "markexpr", "").strip())
 
 
-def _compiled() -> List[Tuple[re.Pattern, str]]:
-    return [(re.compile(p), why) for p, why in SLOW]
-
-
 def mark(items: Sequence[pytest.Item], whole: bool) -> None:
     """Mark the slow items; with ``whole`` (the default selection was collected), fail on a
     pattern that matched nothing or a module left without a fast test."""
-    rules = _compiled()
-    used: Dict[str, int] = {p.pattern: 0 for p, _ in rules}
+    rules = [re.compile(p) for p, _ in SLOW]
+    used: Dict[str, int] = {p.pattern: 0 for p in rules}
     fast_modules: Dict[str, int] = {}
     for item in items:
         nodeid = item.nodeid.removeprefix("tests/")
         module = nodeid.split("::")[0]
         fast_modules.setdefault(module, 0)
         slow = False
-        for pattern, _ in rules:
+        for pattern in rules:
             if pattern.fullmatch(nodeid):
                 used[pattern.pattern] += 1
                 slow = True
