@@ -26,7 +26,7 @@ References (mpmath, ``DPS`` = 60 digits, from the stored floats, which convert e
   SE3 exp   (q, v + F1 ω×v + F2 ω×(ω×v)),  F1 = (1 − cos θ)/θ²,  F2 = (θ − sin θ)/θ³
   SO2 log   atan2(s, c)
   SE2 log   θ = atan2(s, c),  v = [[h, θ/2], [−θ/2, h]] t,  h = (θ/2) cot(θ/2)
-  SO3 log   principal: q ← q/‖q‖, q ← −q if w < 0, θ = 2 atan2(‖q_xyz‖, w), ω = θ q_xyz/‖q_xyz‖
+  SO3 log   principal: q ← q/‖q‖, q ← −q if w ≤ 0, θ = 2 atan2(‖q_xyz‖, w), ω = θ q_xyz/‖q_xyz‖
   SE3 log   ω as SO3, v = t − ½ ω×t + G ω×(ω×t),  G = (1 − (θ/2)cot(θ/2))/θ²
   SE23      SE3's exp and log on (ρ, ω) and on (ν, ω): (q, V ρ, V ν), (V⁻¹p, ω, V⁻¹v)
   Sim3 exp  (q, W v, σ),  W = ∫₀¹ e^{τ(ω̂ + σI)} dτ = D0 I + B ω̂ + C ωωᵀ from
@@ -417,7 +417,7 @@ def log_ref(group: str, p: Sequence[float]) -> List[mp.mpf]:
     q = p[:4]
     r = _norm(q)
     q = [c / r for c in q]
-    if q[0] < 0:
+    if q[0] <= 0:  # w = 0: −π·axis, as the library and jaxlie
         q = [-c for c in q]
     n = _norm(q[1:])
     if n == 0:

@@ -56,8 +56,8 @@ def log_quaternion(wxyz: jax.Array) -> jax.Array:
     """Principal log of a quaternion ``(*batch, 4) -> (*batch, 3)``: ω = 2 atan2(‖v‖, w)/‖v‖ · v
     after the sign choice w ≥ 0, so the angle is in [0, π]. The quaternion need not be
     unit (see ``_scalar.atan2_over`` for the range of norms). The atan2 form is accurate up
-    to and at π (no acos, no snapping); at w = 0 exactly (angle π) the stored vector part
-    gives the axis."""
+    to and at π (no acos, no snapping); at w = 0 exactly (angle π) the sign is flipped, as
+    for w < 0 and as in jaxlie: ω = −π times the stored vector part's direction."""
     u, s, _ = log_quaternion_parts(wxyz)
     return s[..., None] * u
 
@@ -70,7 +70,7 @@ def log_quaternion_parts(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Arr
     rotation does (a drifted, non-unit q). Formulas built on (u, s) rather than the rounded
     ω avoid propagating ω's rounding through products with long translations."""
     w = wxyz[..., 0]
-    sign = jnp.where(w < 0, -1.0, 1.0).astype(wxyz.dtype)
+    sign = jnp.where(w <= 0, -1.0, 1.0).astype(wxyz.dtype)  # w = ±0: −1, as jaxlie
     u = sign[..., None] * wxyz[..., 1:]
     n2, aw = sq_norm(u), sign * w
     ratio = _scalar.atan2_over(n2, aw)
@@ -408,7 +408,8 @@ class SO3(SOBase):
         With the sign of q chosen so that w ≥ 0 and u its vector part,
         ω = 2 atan2(‖u‖, w)/‖u‖ · u (``log_quaternion``). Unlike the trace/acos form
         (Eberly 2024, §9.2), which loses about √ε in the angle near π, it is accurate up to
-        and at π; at exactly π (w = 0) the stored vector part decides the sign of ω. It
+        and at π; at exactly π (w = 0) ω is −π times the stored vector part's direction, as
+        in jaxlie. It
         depends on q's direction only (a drifted, non-unit q gives the log of q/|q|)."""
         return log_quaternion(self.wxyz)
 

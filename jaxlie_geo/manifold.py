@@ -55,7 +55,8 @@ def rplus(transform: _PytreeT, delta: TangentPytree) -> _PytreeT:
 
 
 def rminus(a: Any, b: Any) -> TangentPytree:
-    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``b − a`` for arrays.
+    """Right minus, ``b ⊖ a = log(a⁻¹ @ b)`` for each group leaf, ``a − b`` for arrays
+    (jaxlie 1.5's convention, kept for drop-in use).
 
     Args:
         a: a group element, or a pytree of elements and arrays.
@@ -63,10 +64,11 @@ def rminus(a: Any, b: Any) -> TangentPytree:
 
     Returns:
         A pytree δ of ``a``'s structure with a ``(*batch, tangent_dim)`` array per element,
-        the principal log, so that ``rplus(a, δ) = b`` for every leaf. (jaxlie 1.5 takes
-        the same argument order for groups but returns ``a − b`` for array leaves.)
+        the principal log on group leaves, so that ``rplus(a, δ) = b`` there. On array
+        leaves δ = a − b, as in jaxlie, so ``rplus(a, δ)`` gives ``2a − b`` for them: negate
+        the array leaves of δ where ``rplus`` must invert ``rminus`` on a mixed pytree.
     """
-    return _map(lambda A, B: A._between(B).log(), lambda x, y: y - x, a, b)
+    return _map(lambda A, B: A._between(B).log(), lambda x, y: x - y, a, b)
 
 
 def zero_tangents(pytree: Any) -> TangentPytree:
