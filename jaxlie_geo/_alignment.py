@@ -31,10 +31,10 @@ def nearest_rotation(m: jax.Array) -> jax.Array:
     """The rotation R maximising tr(RᵀM) for ``(*batch, 3, 3)`` matrices M: Umeyama's
     R = U diag(1, 1, det U · det V) Vᵀ for the SVD M = U D Vᵀ (1991, eqs. 39, 40, 43), which
     is the rotation nearest to M in the Frobenius norm (‖R − M‖² = 3 − 2 tr(RᵀM) + ‖M‖²),
-    ``SO3.from_matrix``'s projection. That projection needs no SVD, is accurate to a few
-    ulp where LAPACK's float64 SVD factors were off by 25, and has an exact derivative
+    ``SO3.from_matrix(m, project=True)``. That projection needs no SVD, is accurate to a few
+    ulp where LAPACK's float64 SVD factors are off by 25, and has an exact derivative
     where singular values coincide (an isotropic point cloud), where the SVD's is NaN."""
-    return SO3.from_matrix(m).as_matrix()
+    return SO3.from_matrix(m, project=True).as_matrix()
 
 
 def _check_inputs(
@@ -161,7 +161,7 @@ def umeyama(
     * R = U S Vᵀ with S = diag(1, 1, det U · det V) (eqs. 39, 40, 43): the sign makes R a
       rotation where the unconstrained best orthogonal matrix would be a reflection. This
       R maximises tr(RᵀΣ_xy): it is the rotation nearest to Σ_xy, computed without an SVD
-      by ``SO3.from_matrix`` (``nearest_rotation``);
+      by ``SO3.from_matrix(·, project=True)`` (``nearest_rotation``);
     * s = tr(DS) / σ_x² = (d₁ + d₂ ± d₃) / σ_x² (eq. 42), evaluated as tr(RᵀΣ_xy) / σ_x²
       (equal, and its derivative does not involve the SVD's factors);
     * t = μ_y − s R μ_x (eq. 41).
@@ -195,7 +195,8 @@ def umeyama(
     The rotation's conditioning worsens as d₂ + d₃ → 0 (nearly collinear points).
 
     Derivatives (``jax.jvp``, ``jax.grad``): of the minimiser, through the exact JVP of
-    ``SO3.from_matrix``: also where singular values coincide (an isotropic point cloud).
+    the projection (``nearest_rotation``): also where singular values coincide (an
+    isotropic point cloud).
     The undetermined rotation of collinear points has none, nor do the degenerate
     results above.
 

@@ -110,15 +110,17 @@ class MatrixLieGroup(abc.ABC):
 
     @classmethod
     @abc.abstractmethod
-    def from_matrix(cls, matrix: hints.Array) -> Self:
-        """The element nearest to ``matrix``: its rotation block projected onto the
-        rotations (the nearest in the Frobenius norm), for SE groups the translation column
-        taken as is and the bottom row ignored. A valid matrix gives the element it
-        represents.
+    def from_matrix(cls, matrix: hints.Array, project: bool = False) -> Self:
+        """The element a matrix represents: its rotation block converted by Shepperd's
+        formulas with one power step (a rotation matrix gives its rotation to a few ulp, a
+        matrix a little off the rotations the nearest rotation to second order in the
+        deviation), or with ``project=True`` projected onto the rotations (the nearest in
+        the Frobenius norm, for any block); for SE groups the translation column taken as
+        is and the bottom row ignored.
 
         Args:
-            matrix: ``(*batch, matrix_dim, matrix_dim)`` (homogeneous for SE groups), any
-                real matrix.
+            matrix: ``(*batch, matrix_dim, matrix_dim)`` (homogeneous for SE groups).
+            project: static; project an arbitrary rotation block exactly.
 
         Returns:
             The element, with batch axes ``batch``, in the matrix's dtype."""
@@ -707,15 +709,16 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         return jnp.concatenate([top, bottom], axis=-2)
 
     @classmethod
-    def from_matrix(cls, matrix: hints.Array) -> Self:
+    def from_matrix(cls, matrix: hints.Array, project: bool = False) -> Self:
         """Pose from a ``(*batch, n+1, n+1)`` homogeneous matrix [[A, t], [·, ·]]: the
-        rotation nearest to the block A in the Frobenius norm (the rotation group's
-        ``from_matrix``: a projection), the translation t as is; the bottom row is not read
-        (it is not checked to be (0, …, 0, 1)). Batch axes ``batch``, the matrix's dtype."""
+        rotation of the block A by the rotation group's ``from_matrix`` (with ``project``:
+        the rotation nearest to any A), the translation t as is; the bottom row is not
+        read (it is not checked to be (0, …, 0, 1)). Batch axes ``batch``, the matrix's
+        dtype."""
         m = cls._check_matrix(matrix, "from_matrix")
         n = cls.space_dim
         return cls.from_rotation_and_translation(
-            cls._rotation_type.from_matrix(m[..., :n, :n]), m[..., :n, n]
+            cls._rotation_type.from_matrix(m[..., :n, :n], project), m[..., :n, n]
         )
 
     @classmethod

@@ -19,7 +19,7 @@ _NOT_JITTED = frozenset({"get_batch_axes", "parameters", "reshape"})
 _JITTED_PRIVATE = {"_between": "relative element (a⁻¹ @ b)"}
 """Private methods that public functions call eagerly (``manifold.rminus``, ``geodesic``),
 jitted too, with the name their error messages use."""
-_STATIC_NAMES = ("batch_axes", "dtype")
+_STATIC_NAMES = ("batch_axes", "dtype", "project")
 
 
 def _inherited_doc(cls: type, name: str) -> Any:
@@ -52,7 +52,8 @@ def _checking_elements(fn: Any, where: str) -> Any:
 
 def jit_public_methods(cls: type) -> None:
     """Wrap every public method of ``cls`` (inherited ones included) in ``jax.jit``, each
-    preceded by the trace-time element checks. ``batch_axes`` and ``dtype`` are static.
+    preceded by the trace-time element checks. ``batch_axes``, ``dtype`` and ``project``
+    are static.
 
     A classmethod becomes, on each concrete class, a ``jax.jit`` of the function with
     ``cls`` bound (stored as a staticmethod, its signature without ``cls``), as in jaxlie:

@@ -1,8 +1,30 @@
-"""Nearest rotations: the projections behind ``from_matrix``.
+"""Rotations from matrices: the fast conversion behind ``from_matrix`` and the exact
+projection behind ``from_matrix(..., project=True)``.
 
-``from_matrix`` of every group returns the rotation R nearest to the given matrix block M in
-the Frobenius norm. Since ‖R − M‖² = ‖R‖² + ‖M‖² − 2 tr(RᵀM) and ‖R‖² is fixed, that is
-the rotation that maximises tr(RᵀM).
+**The conversion** (``rotation_quaternion``, ``rotation_unit_complex``) is for matrices that
+are rotations up to rounding or small drift. SO(3): S. W. Shepperd's formulas (*Quaternion
+from rotation matrix*, J. Guidance and Control 1(3), 1978) on J. Day's branches (*Converting
+a rotation matrix to a quaternion*, Insomniac Games, 2015), as jaxlie computes them: the
+branch is chosen on the diagonal (x if m22 < 0 and m00 > m11, y if m22 < 0 otherwise, z if
+m00 < −m11, else w), and the chosen component t = 1 ± m00 ± m11 ± m22 (≥ 1 for a rotation)
+with the three sums and differences of off-diagonal entries is 4·q_j·q. Read that way the
+four candidates are the columns of K + I (K below): for a rotation, K + I = 4qqᵀ. A matrix
+M = R(I + E) a little off the rotations gives K + I = 4qqᵀ + δK, and a column of it is q
+only to first order in E, off the nearest rotation by O(E) in directions where δK's column
+differs from δK q. One step of the power iteration on K + I, q ← (K + I) q₀ / ‖·‖, removes
+that term: (K + I) q₀ = 4q(qᵀq₀) + δK q + O(E²), whose direction is the nearest rotation's
+to first order (its dominant eigenvector, K + I having gap 4 at a rotation), so the result
+is within O(E²) of the projection, and on a rotation within a few ulp of Shepperd's
+quaternion. Derivatives are those of the formula, which at a rotation are the projection's
+(they agree to second order): exact, also at half turns and on the branch switches, where
+the only square root is of the chosen t ≥ 1 (a square root of every candidate, selected
+afterwards, gives 0·∞ = NaN in the gradient of the ones not chosen). Planar: the unit
+vector along (m00 + m11, m10 − m01), which is the projection itself.
+
+**The projection.** ``from_matrix(..., project=True)`` of every group returns the rotation
+R nearest to the given matrix block M in the Frobenius norm. Since
+‖R − M‖² = ‖R‖² + ‖M‖² − 2 tr(RᵀM) and ‖R‖² is fixed, that is the rotation that maximises
+tr(RᵀM).
 
 SO(2): tr(R(θ)ᵀM) = (m00 + m11) cos θ + (m10 − m01) sin θ, maximised by
 θ = atan2(m10 − m01, m00 + m11).
@@ -66,7 +88,12 @@ import jax.numpy as jnp
 
 from ._scalar import pow2_inverse
 
-__all__ = ["nearest_quaternion", "nearest_unit_complex"]
+__all__ = [
+    "nearest_quaternion",
+    "nearest_unit_complex",
+    "rotation_quaternion",
+    "rotation_unit_complex",
+]
 
 _PAIRS = ((0, 1), (2, 3), (0, 2), (1, 3), (0, 3), (1, 2))
 _SYM = tuple((i, j) for i in range(4) for j in range(i, 4))
@@ -273,3 +300,69 @@ def nearest_unit_complex(m: jax.Array) -> jax.Array:
     scale = _pow2_scale(v[..., None])[..., None]
     v = v * scale
     return v / jnp.sqrt(v[..., :1] * v[..., :1] + v[..., 1:] * v[..., 1:])
+
+
+def rotation_quaternion(m: jax.Array) -> jax.Array:
+    """Unit quaternion (w, x, y, z) of a rotation matrix ``m``: Shepperd's formulas on Day's
+    branches, with jaxlie's sign (the chosen component > 0), then one power step on K + I
+    (module docstring). For a rotation, within a few ulp of jaxlie's ``from_matrix``; for
+    M = R(I + E), a unit quaternion within O(‖E‖²) of the nearest rotation's; for a matrix
+    far from every rotation, a unit quaternion that need not be the nearest (the identity
+    where the power step gives 0, as for the zero matrix). Entries beyond about 1e18
+    (float32) overflow in the final norm.
+
+    Args:
+        m: ``(*batch, 3, 3)``, floating.
+
+    Returns:
+        ``(*batch, 4)``, in ``m``'s dtype.
+    """
+    r = _entries(m)
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = r
+    k = _k_matrix(r)
+    x_or_y, z_or_w = m00 > m11, m00 < -m11
+    # The candidates (t, column of K + I), selected before the one square root.
+    cases = [
+        (1 + m00 - m11 - m22, 1),  # x
+        (1 - m00 + m11 - m22, 2),  # y
+        (1 - m00 - m11 + m22, 3),  # z
+        (1 + m00 + m11 + m22, 0),  # w
+    ]
+
+    def column(j: int, t: jax.Array) -> List[jax.Array]:
+        return [t if i == j else _sym(k, i, j) for i in range(4)]
+
+    def pick(a: Tuple[jax.Array, ...], b: Tuple[jax.Array, ...], c: jax.Array) -> Tuple:
+        return tuple(jnp.where(c, x, y) for x, y in zip(a, b))
+
+    x, y, z, w = ((t, *column(j, t)) for t, j in cases)
+    t, *col = pick(pick(x, y, x_or_y), pick(z, w, z_or_w), m22 < 0)
+    half = 0.5 / jnp.sqrt(jnp.where(t > 0, t, 1.0))
+    q1 = _times(k, jnp.ones_like(t), [c * half for c in col])  # (K + I) q₀
+    norm = jnp.sqrt(_sum(v * v for v in q1))
+    ok = norm > 0
+    inv = 1.0 / jnp.where(ok, norm, 1.0)
+    out = [jnp.where(ok, v * inv, 1.0 if i == 0 else 0.0) for i, v in enumerate(q1)]
+    return jnp.moveaxis(jnp.stack(out), 0, -1)
+
+
+def rotation_unit_complex(m: jax.Array) -> jax.Array:
+    """(cos θ, sin θ) of a planar rotation matrix: the unit vector along
+    (m00 + m11, m10 − m01), the nearest rotation to any ``m`` (``nearest_unit_complex``
+    without its power-of-two scaling, so entries beyond about 1e19 overflow in float32),
+    the sine's zero signed as m10's so that a rotation gives jaxlie's first column
+    (−I with a −0.0 below the diagonal: angle −π). The identity where both sums are 0.
+
+    Args:
+        m: ``(*batch, 2, 2)``, floating.
+
+    Returns:
+        ``(*batch, 2)``, in ``m``'s dtype.
+    """
+    cos = m[..., 0, 0] + m[..., 1, 1]
+    sin = m[..., 1, 0] - m[..., 0, 1]
+    sin = jnp.where(sin == 0, jnp.copysign(sin, m[..., 1, 0]), sin)
+    n2 = cos * cos + sin * sin
+    ok = n2 > 0
+    inv = 1.0 / jnp.sqrt(jnp.where(ok, n2, 1.0))
+    return jnp.stack([jnp.where(ok, cos * inv, 1.0), sin * inv], axis=-1)

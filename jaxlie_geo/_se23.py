@@ -271,12 +271,13 @@ class SE23(MatrixLieGroup):
 
     @classmethod
     @override
-    def from_matrix(cls, matrix: hints.Array) -> SE23:
-        """The rotation nearest to the 3×3 block (``SO3.from_matrix``), p and v the fourth
-        and fifth columns as they are; the bottom rows are not read."""
+    def from_matrix(cls, matrix: hints.Array, project: bool = False) -> SE23:
+        """The rotation of the 3×3 block (``SO3.from_matrix``, with ``project`` the
+        nearest rotation to any block), p and v the fourth and fifth columns as they are;
+        the bottom rows are not read."""
         m = cls._check_matrix(matrix, "from_matrix")
         return cls.from_rotation_position_velocity(
-            SO3.from_matrix(m[..., :3, :3]), m[..., :3, 3], m[..., :3, 4]
+            SO3.from_matrix(m[..., :3, :3], project), m[..., :3, 3], m[..., :3, 4]
         )
 
     @override

@@ -363,16 +363,26 @@ class Sim3(MatrixLieGroup):
 
     @classmethod
     @override
-    def from_matrix(cls, matrix: hints.Array) -> Sim3:
-        """The similarity nearest to the 3×3 block M in the Frobenius norm, t the last column
-        as it is (the bottom row is not read). min over s > 0 and R of ‖sR − M‖ takes R
-        nearest to M (``SO3.from_matrix``, whatever s) and s = tr(RᵀM)/3; where that is
-        not positive (M far from any similarity) the log-scale is NaN or −inf, which
-        ``is_valid`` reports."""
+    def from_matrix(cls, matrix: hints.Array, project: bool = False) -> Sim3:
+        """The similarity of a ``(*batch, 4, 4)`` matrix [[sR, t], [·, ·]], t the last
+        column as it is (the bottom row is not read).
+
+        ``project=False``: s = ‖M‖_F/√3 for the 3×3 block M and R = ``SO3.from_matrix``
+        of M/s; for M = sR(I + E) both are the nearest similarity's to second order in E.
+        ``project=True``: the similarity nearest to M in the Frobenius norm: min over
+        s > 0 and R of ‖sR − M‖ takes R nearest to M (``SO3.from_matrix(M,
+        project=True)``, whatever s) and s = tr(RᵀM)/3; where that is not positive (M far
+        from any similarity) the log-scale is NaN or −inf, which ``is_valid`` reports. A
+        zero block gives a log-scale of −inf with either setting."""
         m = cls._check_matrix(matrix, "from_matrix")
         M = m[..., :3, :3]
-        R = SO3.from_matrix(M)
-        s = jnp.sum(R.as_matrix() * M, axis=(-2, -1)) / 3.0
+        if project:
+            R = SO3.from_matrix(M, project=True)
+            s = jnp.sum(R.as_matrix() * M, axis=(-2, -1)) / 3.0
+        else:
+            s = jnp.sqrt(jnp.sum(M * M, axis=(-2, -1)) / 3.0)
+            ok = s > 0
+            R = SO3.from_matrix(M / jnp.where(ok, s, 1.0)[..., None, None])
         return cls._assemble("Sim3.from_matrix", R.wxyz, m[..., :3, 3], jnp.log(s))
 
     @override

@@ -11,7 +11,7 @@ from typing_extensions import override
 from . import _scalar, hints
 from ._base import SOBase
 from ._checks import as_float_array, resolve_dtype
-from ._projection import nearest_unit_complex
+from ._projection import nearest_unit_complex, rotation_unit_complex
 from ._pytree import pytree_dataclass
 from ._xla import constant
 
@@ -62,7 +62,7 @@ class SO2(SOBase):
 
     @classmethod
     @override
-    def from_matrix(cls, matrix: hints.Array) -> SO2:
+    def from_matrix(cls, matrix: hints.Array, project: bool = False) -> SO2:
         """The rotation nearest to ``matrix`` in the Frobenius norm (a projection onto SO(2)).
 
         θ = atan2(m10 − m01, m00 + m11), which maximises tr(R(θ)ᵀM) =
@@ -71,16 +71,23 @@ class SO2(SOBase):
         rotation matrix gives its own first column within 1 ulp (jaxlie reads that column
         as is). Where m00 + m11 = m10 − m01 = 0 (the zero matrix and every reflection
         [[a, b], [b, −a]]) all rotations are equally near, and the result is the
-        identity. ``from_matrix(-I)`` stores the sine +0.0 (angle π).
-        Differentiable; the derivative is 0 on that set.
+        identity. Differentiable; the derivative is 0 on that set.
+
+        Both settings of ``project`` give this rotation. ``project=False`` signs a zero
+        sine as m10, as jaxlie's first column does (``from_matrix(-I)`` with −0.0 below
+        the diagonal: angle −π), and squares entries unscaled (entries beyond about 1e19
+        overflow in float32); ``project=True`` scales the matrix by a power of two first
+        and stores the sine +0.0 at −I (angle π).
 
         Args:
             matrix: ``(*batch, 2, 2)``, any real matrix (not only a rotation).
+            project: static; the variant above.
 
         Returns:
             SO2 with batch axes ``batch``, in the matrix's dtype.
         """
-        return SO2(nearest_unit_complex(cls._check_matrix(matrix, "from_matrix")))
+        m = cls._check_matrix(matrix, "from_matrix")
+        return SO2(nearest_unit_complex(m) if project else rotation_unit_complex(m))
 
     @classmethod
     @override

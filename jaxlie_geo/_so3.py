@@ -12,7 +12,7 @@ from typing_extensions import override
 from . import _scalar, hints
 from ._base import SOBase
 from ._checks import as_float_array, resolve_dtype
-from ._projection import nearest_quaternion
+from ._projection import nearest_quaternion, rotation_quaternion
 from ._pytree import pytree_dataclass
 from ._scalar import sq_norm
 from ._xla import Entries, constant, from_entries
@@ -323,41 +323,50 @@ class SO3(SOBase):
 
     @classmethod
     @override
-    def from_matrix(cls, matrix: hints.Array) -> SO3:
-        """The rotation nearest to ``matrix`` in the Frobenius norm (a projection onto SO(3)).
+    def from_matrix(cls, matrix: hints.Array, project: bool = False) -> SO3:
+        """The rotation of a rotation matrix, or with ``project=True`` the rotation nearest
+        to any matrix in the Frobenius norm.
 
-        The quaternion is the eigenvector of the largest eigenvalue of the symmetric 4×4
-        matrix K with qᵀKq = tr(R(q)ᵀM) (Bar-Itzhack, *New method for extracting the
-        quaternion from a rotation matrix*, 2000; Horn, *Closed-form solution of absolute
-        orientation using unit quaternions*, 1987), by a fixed number of cyclic Jacobi
-        sweeps, elementwise (no choice depends on other elements of a batch). The same
-        rotation as the SVD projection U diag(1, 1, det UVᵀ) Vᵀ of M = U Σ Vᵀ. Formulas,
-        algorithm, measurements: ``jaxlie_geo/_projection.py``.
+        ``project=False`` (the default): Shepperd's formulas on J. Day's branches, as
+        jaxlie computes them, then one power step on Bar-Itzhack's K + I
+        (``jaxlie_geo/_projection.py``). For a rotation matrix, its quaternion within
+        3 ulp of jaxlie's, with jaxlie's sign (the component of Day's branch, x if
+        m22 < 0 and m00 > m11, y if m22 < 0 otherwise, z if m00 < −m11, else w, is > 0).
+        For a matrix R(I + E) off the rotations (drift, rounding, a noisy estimate), a
+        unit quaternion within O(‖E‖²) of the nearest rotation's (Shepperd's formulas
+        alone are O(‖E‖) off); for a matrix far from every rotation a valid rotation that
+        need not be the nearest. Derivatives are the formula's: at a rotation, those of
+        the projection, exact (half turns and branch switches included: the only square
+        root is of the chosen component, ≥ 1 for a rotation).
 
-        Accuracy: for a rotation matrix, its quaternion within 2 ulp of jaxlie's, with
-        jaxlie's sign (J. Day's branches on the diagonal: the component that jaxlie
-        computes, x if m22 < 0 and m00 > m11, y if m22 < 0 otherwise, z if m00 < −m11,
-        else w, is ≥ 0). For any matrix, the nearest rotation within 1.3 ulp · κ
-        (measured, largest entry), κ = (d1 + d2 + d3)/(d2 + d3) with d the singular
-        values, the last one carrying the sign of det M: in float32, at most 2.1 ulp for
-        rotations with noise up to 0.1, and 2.6 with noise 0.3.
-
-        Hard cases: a rotation by π gives its quaternion (w = 0). A reflection
-        (det M < 0) gives U diag(1, 1, −1) Vᵀ, which flips the direction of the smallest
-        singular value. Where the nearest rotation is not unique (d2 + d3 = 0: the zero
-        matrix, rank 1, orthogonal reflections), one of the nearest, never NaN: the
+        ``project=True``: the projection onto SO(3) for any matrix. The quaternion is the
+        eigenvector of the largest eigenvalue of the symmetric 4×4 matrix K with
+        qᵀKq = tr(R(q)ᵀM) (Bar-Itzhack, *New method for extracting the quaternion from a
+        rotation matrix*, 2000; Horn, *Closed-form solution of absolute orientation using
+        unit quaternions*, 1987), by a fixed number of cyclic Jacobi sweeps, elementwise
+        (no choice depends on other elements of a batch). The same rotation as the SVD
+        projection U diag(1, 1, det UVᵀ) Vᵀ of M = U Σ Vᵀ, within 1.3 ulp · κ (measured,
+        largest entry), κ = (d1 + d2 + d3)/(d2 + d3) with d the singular values, the
+        last one carrying the sign of det M: in float32, at most 2.1 ulp for rotations
+        with noise up to 0.1, and 2.6 with noise 0.3. A reflection (det M < 0) gives
+        U diag(1, 1, −1) Vᵀ. Where the nearest rotation is not unique (d2 + d3 = 0: the
+        zero matrix, rank 1, orthogonal reflections), one of the nearest, never NaN: the
         identity for 0, diag(1, 0, 0) and diag(1, 1, −1), the half turn about x for −I.
         The derivative is that of the projection (a custom JVP); where the projection is
         not unique it does not exist and is returned finite (0 where the linear system
-        behind it is exactly singular).
+        behind it is exactly singular). It costs many times the default (the results page
+        has both).
 
         Args:
-            matrix: ``(*batch, 3, 3)``, any real matrix (not only a rotation).
+            matrix: ``(*batch, 3, 3)``: a rotation matrix, or any real matrix with
+                ``project=True``.
+            project: static; whether to project an arbitrary matrix (above).
 
         Returns:
             SO3 with batch axes ``batch``, in the matrix's dtype.
         """
-        return SO3(nearest_quaternion(cls._check_matrix(matrix, "from_matrix")))
+        m = cls._check_matrix(matrix, "from_matrix")
+        return SO3(nearest_quaternion(m) if project else rotation_quaternion(m))
 
     @classmethod
     @override

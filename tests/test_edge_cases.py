@@ -108,7 +108,8 @@ def test_log_is_independent_of_quaternion_sign(G, dtype, seed):
 def test_angle_of_a_half_turn():
     """SO2 and SE2 (the unit-complex layouts, written out): a rotation by π reads ±π, a valid
     log (exp of it gives the rotation back), in every float dtype; −π exactly where the stored
-    sine is −0.0, as atan2 gives (``from_matrix(−I)`` stores +0.0: π)."""
+    sine is −0.0, as atan2 gives (``from_matrix(−I)`` stores the −0.0 that numpy's ``-np.eye(2)``
+    has below the diagonal, as jaxlie does: −π)."""
     for dtype in HALF_DTYPES + DTYPES:
         R = SO2.from_matrix(-np.eye(2, dtype=dtype))
         want = jnp.asarray(-np.pi if np.signbit(np.float32(R.unit_complex[1])) else np.pi, dtype)
