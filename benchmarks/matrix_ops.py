@@ -9,10 +9,11 @@ For each group (SO2, SE2, SO3, SE3, Sim3, SE23) and operation
   adjoint        G(p).adjoint()                      (N, k, k)
   grad           x ↦ ∇ ‖log(exp(x)⁻¹ b)‖²            (N, k)
   from_matrix    G.from_matrix(M).parameters()       (N, P)
+  from_matrix_project  G.from_matrix(M, project=True).parameters()   (N, P)
 
 at N = 10³ and 10⁶, in float32 and float64, three jit-compiled functions are timed on the
 same inputs: jaxlie_geo's, jaxlie 1.5's where it has the operation (SO2, SE2, SO3, SE3; it
-has no ``jac_right`` or ``jac_right_inv``), and the *write floor*: an array of the
+has no ``jac_right``, ``jac_right_inv`` or projection), and the *write floor*: an array of the
 output's shape and dtype filled from one entry of the input per element, the least any
 implementation can cost. Tangents x are standard normal times 0.8 (rotation angles up to
 about π); elements p = exp(x); b = exp of another such tangent; M is the matrix of an
@@ -45,7 +46,15 @@ from benchmarks.common import fmt_n, fmt_ns
 from benchmarks.report import save
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
-OPS = ("jac_right", "jac_right_inv", "jlog", "adjoint", "grad", "from_matrix")
+OPS = (
+    "jac_right",
+    "jac_right_inv",
+    "jlog",
+    "adjoint",
+    "grad",
+    "from_matrix",
+    "from_matrix_project",
+)
 JAXLIE_GROUPS = ("SO2", "SE2", "SO3", "SE3")
 JAXLIE_OPS = ("jlog", "adjoint", "grad", "from_matrix")
 ROUNDS = 5
@@ -65,6 +74,8 @@ def make_op(lib, group: str, op: str):
         return lambda p: G(p).adjoint()
     if op == "from_matrix":
         return lambda m: G.from_matrix(m).parameters()
+    if op == "from_matrix_project":
+        return lambda m: G.from_matrix(m, project=True).parameters()
     return speed.make_op(lib, group, "grad", native=True)
 
 
