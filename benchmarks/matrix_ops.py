@@ -44,6 +44,7 @@ from benchmarks import common as C
 from benchmarks import run as speed
 from benchmarks.common import fmt_n, fmt_ns
 from benchmarks.report import save
+from jaxlie_geo._xla import x64
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
 OPS = (
@@ -166,7 +167,7 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     rows = []
     for dtype in args.dtypes:
-        with jax.enable_x64(dtype == "float64"):
+        with x64(dtype == "float64"):
             for group in args.groups:
                 for op in args.ops:
                     for n in args.sizes:

@@ -766,11 +766,12 @@ MATRIX_GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
 MATRIX_METHOD = """\
 `benchmarks/matrix_ops.py`: every group's Jacobians, `jlog`, adjoint, the gradient of
 ‖log(exp(x)⁻¹ b)‖², `from_matrix` (of matrices with 10⁻³ noise on the rotation block) and
-`from_matrix(..., project=True)` (the exact projection, on the same matrices), timed beside jaxlie 1.5 where it has the operation and beside the *write floor*, a function
-that writes an array of the output's shape and dtype from one input entry per element (at
-10³ it is mostly the call's dispatch). Time per element, median of 5 rounds in which the
-functions run in turn; ×floor is jaxlie_geo's time over the floor's. In bold: slower than
-jaxlie, or a matrix-valued result over 3x its floor."""
+`from_matrix(..., project=True)` (the exact projection, on the same matrices), timed beside
+jaxlie 1.5 where it has the operation and beside the *write floor*, a function that writes
+an array of the output's shape and dtype from one input entry per element (at 10³ it is
+mostly the call's dispatch). Time per element, median of 5 rounds in which the functions
+run in turn; ×floor is jaxlie_geo's time over the floor's. In bold: slower than jaxlie, or
+a matrix-valued result over 3x its floor."""
 
 
 def matrix_ops_section(raw: dict, order: list) -> list:

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from benchmarks import common as C
+from jaxlie_geo._xla import x64
 
 DATASETS = {
     "w10000": ("w10000", {}),
@@ -40,14 +41,13 @@ DATASETS = {
 def normal_matrix(name: str):
     """(pattern, upper-triangle values of H + 1e-5·I, g) at the dataset's initial poses."""
     import gtsam
-    import jax
 
     from jaxlie_geo import pose_graph
     from jaxlie_geo.pose_graph import _solver
 
     file, options = DATASETS[name]
     graph = pose_graph.read(gtsam.findExampleDataFile(file), **options)
-    with jax.enable_x64(True):
+    with x64(True):
         p, poses = _solver._problem(graph, 1e-6, None)
         edges = np.stack([np.asarray(p.edge_i), np.asarray(p.edge_j)], -1)
         path = _solver.lsq.system(

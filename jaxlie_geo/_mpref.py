@@ -74,7 +74,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import importlib
 import math
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
@@ -82,6 +81,8 @@ import jax
 import jax.numpy as jnp
 import mpmath as mp  # type: ignore[import-untyped]
 import numpy as np
+
+from jaxlie_geo._xla import x64
 
 DPS = 60
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
@@ -884,12 +885,7 @@ def derivative_errors(got, group, vnorm, order, dtype, with_argmax=False):
 def x64_for(dtype: str):
     """float32 runs with x64 off (what a float32 user has: no silent promotion can hide
     float32 rounding), float64 with x64 on."""
-    if hasattr(jax, "enable_x64"):  # jax >= 0.7
-        ctx = jax.enable_x64(dtype == "float64")
-    else:
-        experimental: Any = importlib.import_module("jax.experimental")
-        ctx = experimental.enable_x64() if dtype == "float64" else experimental.disable_x64()
-    with ctx:
+    with x64(dtype == "float64"):
         yield
 
 

@@ -10,6 +10,7 @@ A leaf module: it knows a group element by its interface (``_checks.is_element``
 
 from __future__ import annotations
 
+import importlib
 import re
 from typing import Any, List, Optional, Sequence, Tuple
 
@@ -50,6 +51,17 @@ if not at_least(jax.__version__, (0, 5, 3)):
         f"jaxlie_geo needs jax >= 0.5.3 (the first release that differentiates "
         f"lax.optimization_barrier); found jax {jax.__version__}."
     )
+
+
+def x64(enabled: bool) -> Any:
+    """A context manager with float64 on or off, on every supported jax:
+    ``jax.enable_x64(enabled)`` where jax has it, ``jax.experimental.enable_x64()`` or
+    ``disable_x64()`` before."""
+    if hasattr(jax, "enable_x64"):
+        return jax.enable_x64(enabled)
+    experimental: Any = importlib.import_module("jax.experimental")
+    return experimental.enable_x64() if enabled else experimental.disable_x64()
+
 
 TANGENTS_PASS_THROUGH = at_least(jax.__version__, (0, 11))
 """Whether ``materialize`` leaves tangents unbarriered: jax ≥ 0.11 puts them behind a

@@ -42,6 +42,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from jaxlie_geo import SE2, SE3, pose_graph
+from jaxlie_geo._xla import x64
 from jaxlie_geo.pose_graph import Cauchy, Huber, PoseGraph, graph_cost, solve
 
 REPO = Path(__file__).resolve().parents[1]
@@ -317,7 +318,7 @@ def test_gradient_vanishes_at_the_optimum(dim: int) -> None:
     every pose but the anchored one vanishes there too."""
     graph = _case(dim).graph
     G = GROUP[dim]
-    with jax.enable_x64(True):
+    with x64(True):
         Z = G(jnp.asarray(graph.measurement_group().parameters(), jnp.float64))
         W = jnp.asarray(np.swapaxes(np.linalg.cholesky(graph.information), -1, -2))
         i, j = graph.edges[:, 0], graph.edges[:, 1]
@@ -527,7 +528,7 @@ def test_kernel_rho_and_weight(kernel, definition) -> None:
     central difference of ρ (away from Huber's kink at s = k², where ρ' is continuous)."""
     k = kernel.threshold
     s = np.concatenate([np.geomspace(1e-6, 0.9, 8), np.geomspace(1.1, 1e4, 8)]) * k * k
-    with jax.enable_x64(True):
+    with x64(True):
         rho, weight = (np.asarray(a) for a in kernel.rho_and_weight(jnp.asarray(s)))
         h = 1e-6 * s
         up, _ = kernel.rho_and_weight(jnp.asarray(s + h))
@@ -746,12 +747,13 @@ import jax
 import numpy as np
 from jaxlie_geo.pose_graph import PoseGraph, solve
 from jaxlie_geo.pose_graph._solver import _problem
+from jaxlie_geo._xla import x64
 
 data = np.load(sys.argv[1])
 names = ("ids", "poses", "edges", "measurements", "information")
 graph = PoseGraph(3, *(data[name] for name in names))
 devices = jax.devices()
-with jax.enable_x64(True):
+with x64(True):
     p, _ = _problem(graph, 1e-6, devices)
 out = {
     "devices": len(devices),

@@ -18,6 +18,7 @@ import numpy as onp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .. import _least_squares as lsq
+from .._xla import x64
 from ._factors import Group, Problem, RobustKernel, cost, linearise, retract
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
 
@@ -181,7 +182,7 @@ def solve(
         raise ValueError("solve: an edge joins a pose to itself")
     _check_connected(graph)
     start = time.perf_counter()
-    with jax.enable_x64(True):
+    with x64(True):
         p, poses = _problem(graph, anchor_sigma, devices)
         indices = [onp.stack([onp.asarray(p.edge_i), onp.asarray(p.edge_j)], -1), onp.zeros((1, 1))]
         model = _GraphModel(graph.group, robust)
@@ -220,7 +221,7 @@ def graph_cost(
 ) -> float:
     """The cost ``solve`` minimises, at ``graph.poses`` (the anchor at the first pose
     itself, so it adds 0): ½ Σ ρ(‖Wᵢⱼ rᵢⱼ‖²), float64."""
-    with jax.enable_x64(True):
+    with x64(True):
         p, poses = _problem(graph, anchor_sigma, None)
         return float(_cost_jit(graph.group, robust, poses, p))
 
