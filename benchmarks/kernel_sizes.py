@@ -77,6 +77,15 @@ def count_instructions(hlo_text: str) -> int:
     return n
 
 
+def instructions(group: str, op: str, dtype: str) -> int:
+    """The optimised instruction count of ``op`` (compiled without clearing any cache)."""
+    import jax
+
+    with x64(dtype == "float64"):
+        fn, args = program(group, op, dtype)
+        return count_instructions(jax.jit(fn).lower(*args).compile().as_text())
+
+
 def measure(group: str, op: str, dtype: str, repeats: int = 1) -> dict:
     """Instructions and compile seconds (min over ``repeats``, caches cleared each time)."""
     import jax

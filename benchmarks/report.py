@@ -836,6 +836,60 @@ def _matrix_ops_table(info: dict, dtype: str, rows: list) -> list:
     return lines + table(header, body, align) + [""]
 
 
+KERNEL_OPS = ("exp", "log", "jac_right", "jac_right_inv", "jlog", "grad", "from_matrix")
+KERNEL_METHOD = """\
+`benchmarks/kernel_sizes.py`: each operation on a batch of 1,000, compiled by `jax.jit`;
+instructions of the optimised HLO (every computation, fused ones included) and compile
+seconds (trace, lower and compile from empty caches, the minimum of 3). `grad` is
+x ↦ ∇ Σ ‖log(exp(x))‖². The ratios are Sim(3)'s and SE₂(3)'s over SE(3)'s. The counts
+depend on the jax version only; `tests/test_kernel_sizes.py` fails when one grows more than
+20% past `tests/kernel_sizes.json`."""
+
+
+def kernel_sizes_section(raw: dict, order: list) -> list:
+    found = [raw[m]["kernel-sizes"] for m in order if "kernel-sizes" in raw[m]]
+    if not found:
+        return []
+    lines = ["## Kernel sizes and compile times", ""]
+    lines += KERNEL_METHOD.splitlines() + [""]
+    for data in found:
+        info = data["machine"]
+        by = {(r["group"], r["op"], r["dtype"]): r for r in data["results"]}
+        for dtype in ("float32", "float64"):
+            groups = [g for g in MATRIX_GROUPS if any((g, o, dtype) in by for o in KERNEL_OPS)]
+            if not groups:
+                continue
+            header = ["op"] + groups + ["Sim3 / SE3", "SE23 / SE3"]
+            body = []
+            for o in KERNEL_OPS:
+                cells = [by.get((g, o, dtype)) for g in groups]
+                if not any(cells):
+                    continue
+                row = [o] + [
+                    f"{c['instructions']:,} / {c['compile_s']:.2f} s" if c else "" for c in cells
+                ]
+                ref = by.get(("SE3", o, dtype))
+                for g in ("Sim3", "SE23"):
+                    c = by.get((g, o, dtype))
+                    if c is None or ref is None:
+                        row.append("")
+                        continue
+                    ri = c["instructions"] / ref["instructions"]
+                    rc = c["compile_s"] / ref["compile_s"]
+                    text = f"{ri:.1f}x / {rc:.1f}x"
+                    row.append(f"**{text}**" if max(ri, rc) > 3 else text)
+                body.append(row)
+            lines += [
+                f"### {label(info)}, {dtype}: instructions / compile",
+                "",
+                f"jax {info.get('jax', '?')}, commit {_commit(info)}, measured {_date(info)}. "
+                "**Bold**: over 3x SE(3)'s.",
+                "",
+            ]
+            lines += table(header, body, "l" + "r" * (len(header) - 1)) + [""]
+    return lines
+
+
 def accuracy_section(raw: dict, order: list) -> list:
     found = [raw[m]["accuracy"] for m in order if "accuracy" in raw[m]]
     if not found:
@@ -1066,6 +1120,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += jacobians_section(raw, order)
     lines += extended_section(raw, order)
     lines += matrix_ops_section(raw, order)
+    lines += kernel_sizes_section(raw, order)
     lines += splines_section(raw, order)
     lines += pose_graphs_section(raw, order)
     lines += spline_fit_section(raw, order)
