@@ -890,6 +890,47 @@ def kernel_sizes_section(raw: dict, order: list) -> list:
     return lines
 
 
+IK_METHOD = """\
+`benchmarks/ik_program.py`: forward kinematics of a 7-joint chain (14 SE3 products), the
+log of the pose residual and its `jax.jacfwd`, and one damped Gauss–Newton step, jitted as
+one program, for one problem and vmapped over 1,000, float32; the same source on both
+libraries. Compile: trace, lower and compile from empty caches; run: median per call; each
+the minimum over repetitions in which the libraries alternate. **Bold**: slower than
+jaxlie."""
+
+
+def ik_program_section(raw: dict, order: list) -> list:
+    found = [raw[m]["ik-program"] for m in order if "ik-program" in raw[m]]
+    if not found:
+        return []
+    lines = ["## An inverse-kinematics program: compile and run beside jaxlie", ""]
+    lines += IK_METHOD.splitlines() + [""]
+    for data in found:
+        info = data["machine"]
+        body = []
+        for r in data["results"]:
+            cells = [str(r["batch"])]
+            for a, b, unit in (
+                (r["compile_ours_s"], r["compile_jaxlie_s"], "s"),
+                (r["run_ours_s"], r["run_jaxlie_s"], "ns"),
+            ):
+                ours = f"{a:.2f} s" if unit == "s" else fmt_ns(a * 1e9)
+                ref = f"{b:.2f} s" if unit == "s" else fmt_ns(b * 1e9)
+                cells += [f"**{ours}**" if a > b else ours, ref, f"{a / b:.2f}"]
+            body.append(cells)
+        header = ["problems", "compile: jaxlie_geo", "jaxlie", "ratio", "run: jaxlie_geo"]
+        header += ["jaxlie", "ratio"]
+        lines += [
+            f"### {label(info)}",
+            "",
+            f"jax {info.get('jax', '?')}, jaxlie {info.get('jaxlie', '?')}, commit "
+            f"{_commit(info)}, measured {_date(info)}.",
+            "",
+        ]
+        lines += table(header, body, "rrrrrrr") + [""]
+    return lines
+
+
 def accuracy_section(raw: dict, order: list) -> list:
     found = [raw[m]["accuracy"] for m in order if "accuracy" in raw[m]]
     if not found:
@@ -1121,6 +1162,7 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += extended_section(raw, order)
     lines += matrix_ops_section(raw, order)
     lines += kernel_sizes_section(raw, order)
+    lines += ik_program_section(raw, order)
     lines += splines_section(raw, order)
     lines += pose_graphs_section(raw, order)
     lines += spline_fit_section(raw, order)
