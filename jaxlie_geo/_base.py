@@ -54,6 +54,7 @@ from ._checks import (
     resolve_dtype,
 )
 from ._jit import jit_public_methods
+from ._scalar import components
 from ._xla import aligned, materialize, matmul_unrolled
 
 
@@ -505,7 +506,7 @@ class MatrixLieGroup(abc.ABC):
         Entry (i, j) is Σ_l hat(e_j)[i, l] p̃_l, written out from the constant generators:
         e.g. ``[I, −p̂]`` for SE(3), ``−p̂`` for SO(3)."""
         n, d = cls.matrix_dim, cls.space_dim
-        coords = [points[..., i] for i in range(d)]
+        coords = list(components(points))
         if n > d:  # homogeneous coordinates (p, 1, 0, …): SE₂(3)'s velocity column reads 0
             coords.append(jnp.ones_like(coords[0]))
             coords.extend(jnp.zeros_like(coords[0]) for _ in range(n - d - 1))

@@ -189,12 +189,22 @@ def _switched(
 # Vector helpers.
 
 
+def components(x: jax.Array) -> Tuple[jax.Array, ...]:
+    """The entries of ``x`` along its last axis, each ``(*batch,)``, in one ``unstack``:
+    the same values as ``x[..., i]``, but reverse-mode differentiation transposes them into
+    one concatenation, where per-index slices transpose into a pad and an addition each
+    (a third of the instructions of a spline's gradient)."""
+    return tuple(jnp.unstack(x, axis=-1))
+
+
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
     """Dot product over the last axis, ``(*batch, n) -> batch``, written out as products and
     sums rather than a reduction, so that it stays in its neighbours' fused loop."""
-    out = a[..., 0] * b[..., 0]
-    for i in range(1, a.shape[-1]):
-        out = out + a[..., i] * b[..., i]
+    A = components(a)
+    B = A if b is a else components(b)
+    out = A[0] * B[0]
+    for i in range(1, len(A)):
+        out = out + A[i] * B[i]
     return out
 
 

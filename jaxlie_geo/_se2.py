@@ -13,6 +13,7 @@ from . import _scalar, hints
 from ._base import SEBase
 from ._checks import as_float_array, check_batches
 from ._pytree import pytree_dataclass
+from ._scalar import components
 from ._so2 import SO2
 from ._xla import constant
 
@@ -93,7 +94,7 @@ class SE2(SEBase[SO2]):
             SE2 with batch axes ``batch``.
         """
         xi = cls._check_tangent(tangent)
-        vx, vy, theta = xi[..., 0], xi[..., 1], xi[..., 2]
+        vx, vy, theta = components(xi)
         c, k = _scalar.half_angle_of(theta)
         s = 0.5 * theta * k
         A, B = c * k, s * k
@@ -110,7 +111,7 @@ class SE2(SEBase[SO2]):
         rotation and h = (θ/2)cot(θ/2) = 1 − θ² G(θ²) (the inverse of exp's V, since
         A² + B² = sinc²(θ/2); Zhang 2022, §5.3, reaches the same velocity geometrically)."""
         p = self.unit_complex_xy
-        c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+        c, s, tx, ty = components(p)
         theta = jnp.arctan2(s, c)
         x = theta * theta
         h = 1.0 - x * _scalar.G_principal(x)
@@ -121,7 +122,7 @@ class SE2(SEBase[SO2]):
     @override
     def hat(cls, tangent: hints.Array) -> jax.Array:
         xi = as_float_array(tangent, "tangent", (3,), "SE2.hat")
-        vx, vy, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        vx, vy, th = components(xi)
         z = jnp.zeros_like(th)
         return jnp.stack(
             [jnp.stack([z, -th, vx], -1), jnp.stack([th, z, vy], -1), jnp.stack([z, z, z], -1)],
@@ -140,7 +141,7 @@ class SE2(SEBase[SO2]):
         (vx, vy, θ) ordering (Eberly 2024, eq. 24, with the blocks permuted to translation
         first)."""
         p = self.unit_complex_xy
-        c, s, tx, ty = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+        c, s, tx, ty = components(p)
         z, one = jnp.zeros_like(c), jnp.ones_like(c)
         return jnp.stack(
             [jnp.stack([c, -s, ty], -1), jnp.stack([s, c, -tx], -1), jnp.stack([z, z, one], -1)],
@@ -149,7 +150,7 @@ class SE2(SEBase[SO2]):
 
     @staticmethod
     def _jac_parts(xi: jax.Array):
-        rx, ry, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        rx, ry, th = components(xi)
         x = th * th
         f1, tf2 = _scalar.F1(x), th * _scalar.F2(x)
         # J_r's translation column p (Solà et al. 2018, eq. 163, in kernels).
@@ -201,7 +202,7 @@ class SE2(SEBase[SO2]):
 
     @classmethod
     def _jac_right_inv(cls, xi: jax.Array, G: Callable[[jax.Array], jax.Array]) -> jax.Array:
-        rx, ry, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        rx, ry, th = components(xi)
         x = th * th
         g = G(x)
         h, tg, half = 1.0 - x * g, th * g, 0.5 * th
@@ -213,5 +214,5 @@ class SE2(SEBase[SO2]):
         """``(*batch, 3) -> (*batch, 3, 3)``: [[0, −θ, vy], [θ, 0, −vx], [0, 0, 0]] for the
         (vx, vy, θ) ordering."""
         xi = cls._check_tangent(tangent, "ad")
-        vx, vy, th = xi[..., 0], xi[..., 1], xi[..., 2]
+        vx, vy, th = components(xi)
         return cls._mat3(None, th, vy, -vx, 0.0)

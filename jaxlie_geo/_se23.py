@@ -23,6 +23,7 @@ from ._scalar import dot, sq_norm
 from ._se3 import SE3, coupled_inverse, coupling_entries, exp_translation, log_translation
 from ._so3 import (
     SO3,
+    cross,
     exp_half_angle,
     exp_quaternion,
     log_quaternion_parts,
@@ -206,9 +207,9 @@ class SE23(MatrixLieGroup):
         Rx = [matmul_unrolled(R, tangent[..., i : i + 3, None])[..., 0] for i in (0, 3, 6)]
         return jnp.concatenate(
             [
-                Rx[0] + jnp.cross(self.position(), Rx[1]),
+                Rx[0] + cross(self.position(), Rx[1]),
                 Rx[1],
-                Rx[2] + jnp.cross(self.velocity(), Rx[1]),
+                Rx[2] + cross(self.velocity(), Rx[1]),
             ],
             -1,
         )
@@ -220,9 +221,9 @@ class SE23(MatrixLieGroup):
         w1, w2 = a[..., 3:6], b[..., 3:6]
         return jnp.concatenate(
             [
-                jnp.cross(w1, b[..., :3]) + jnp.cross(a[..., :3], w2),
-                jnp.cross(w1, w2),
-                jnp.cross(w1, b[..., 6:]) + jnp.cross(a[..., 6:], w2),
+                cross(w1, b[..., :3]) + cross(a[..., :3], w2),
+                cross(w1, w2),
+                cross(w1, b[..., 6:]) + cross(a[..., 6:], w2),
             ],
             -1,
         )

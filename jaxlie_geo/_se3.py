@@ -13,7 +13,7 @@ from ._alignment import umeyama_parts
 from ._base import SEBase
 from ._checks import as_float_array
 from ._pytree import pytree_dataclass
-from ._scalar import dot, sq_norm
+from ._scalar import components, dot, sq_norm
 from ._so3 import (
     SO3,
     cross,
@@ -149,8 +149,7 @@ def coupling_entries(
     k_phi = (f2 - 2.0 * c2) * delta
     k_eye = 2.0 * delta * (d * x - f2)
     k_pp = -2.0 * d * delta
-    r = [rho[..., i] for i in range(3)]
-    p = [phi[..., i] for i in range(3)]
+    r, p = components(rho), components(phi)
     s = [k_rho * r[i] + k_phi * p[i] for i in range(3)]  # Q's skew part is ŝ
 
     def sym(i: int, j: int) -> jax.Array:
@@ -309,7 +308,7 @@ class SE3(SEBase[SO3]):
         R = self.rotation().as_matrix()
         Rv = matmul_unrolled(R, tangent[..., :3, None])[..., 0]
         Rw = matmul_unrolled(R, tangent[..., 3:, None])[..., 0]
-        return jnp.concatenate([Rv + jnp.cross(self.translation(), Rw), Rw], -1)
+        return jnp.concatenate([Rv + cross(self.translation(), Rw), Rw], -1)
 
     @classmethod
     @override
@@ -317,7 +316,7 @@ class SE3(SEBase[SO3]):
         """[(ρ₁, φ₁), (ρ₂, φ₂)] = (φ₁ × ρ₂ + ρ₁ × φ₂, φ₁ × φ₂)."""
         rho1, phi1, rho2, phi2 = a[..., :3], a[..., 3:], b[..., :3], b[..., 3:]
         return jnp.concatenate(
-            [jnp.cross(phi1, rho2) + jnp.cross(rho1, phi2), jnp.cross(phi1, phi2)], -1
+            [cross(phi1, rho2) + cross(rho1, phi2), cross(phi1, phi2)], -1
         )
 
     # -- fitting --------------------------------------------------------------------

@@ -19,7 +19,7 @@ from ._alignment import umeyama_parts
 from ._base import MatrixLieGroup, block_matrix
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
 from ._pytree import pytree_dataclass
-from ._scalar import dot, sq_norm
+from ._scalar import components, dot, sq_norm
 from ._so3 import (
     SO3,
     cross,
@@ -282,7 +282,7 @@ class Sim3(MatrixLieGroup):
         # Computed once into one array: fused, each is recomputed per entry that reads it.
         a, d0, b, c, _, d1_0, d1_1, d1_2, d0_3, d1_3, d0_4, q0, q1, q2, q3 = materialize_columns(
             *_scalar.sim3_family(sigma, x, _scalar.COEFFICIENTS_AND_DERIVATIVES),
-            *(q[..., i] for i in range(4)),
+            *components(q),
         )
         coeffs = (a, d0, b, c)
         d1_0, d1_1, d1_2, d0_3, d1_3, d0_4 = (

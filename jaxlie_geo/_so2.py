@@ -13,6 +13,7 @@ from ._base import SOBase
 from ._checks import as_float_array, resolve_dtype
 from ._projection import nearest_unit_complex, rotation_unit_complex
 from ._pytree import pytree_dataclass
+from ._scalar import components
 from ._xla import constant
 
 
@@ -51,7 +52,7 @@ class SO2(SOBase):
         """Angle atan2(sin, cos), shape ``batch``, in [-π, π]: -π only for a rotation by π
         whose stored sine is -0.0 (``SO2(jnp.array([-1.0, -0.0]))``), as in jaxlie and NumPy.
         Depends on the direction of ``unit_complex`` only."""
-        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        c, s = components(self.unit_complex)
         return jnp.arctan2(s, c)
 
     @classmethod
@@ -164,19 +165,19 @@ class SO2(SOBase):
     @override
     def _matrix_block(self) -> jax.Array:
         # Inside SE2's matrices a stack fuses better than as_matrix's select.
-        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        c, s = components(self.unit_complex)
         return jnp.stack([jnp.stack([c, -s], -1), jnp.stack([s, c], -1)], -2)
 
     @override
     def _apply_kernel(self, points: jax.Array) -> jax.Array:
-        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
-        x, y = points[..., 0], points[..., 1]
+        c, s = components(self.unit_complex)
+        x, y = components(points)
         return jnp.stack([c * x - s * y, s * x + c * y], axis=-1)
 
     @override
     def _multiply_kernel(self, other: SO2) -> SO2:
-        c1, s1 = self.unit_complex[..., 0], self.unit_complex[..., 1]
-        c2, s2 = other.unit_complex[..., 0], other.unit_complex[..., 1]
+        c1, s1 = components(self.unit_complex)
+        c2, s2 = components(other.unit_complex)
         return SO2(jnp.stack([c1 * c2 - s1 * s2, s1 * c2 + c1 * s2], axis=-1))
 
     @override
@@ -202,5 +203,5 @@ class SO2(SOBase):
 
     @override
     def _rplus_jacobian(self) -> jax.Array:
-        c, s = self.unit_complex[..., 0], self.unit_complex[..., 1]
+        c, s = components(self.unit_complex)
         return jnp.stack([-s, c], axis=-1)[..., None]

@@ -14,20 +14,20 @@ from ._base import SOBase
 from ._checks import as_float_array, resolve_dtype
 from ._projection import nearest_quaternion, rotation_quaternion
 from ._pytree import pytree_dataclass
-from ._scalar import sq_norm
+from ._scalar import components, sq_norm
 from ._xla import Entries, constant, from_entries
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
     """Cross product over the last axis (broadcasting), written out: no (..., 3, 3)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    a0, a1, a2 = components(a)
+    b0, b1, b2 = components(b)
     return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def skew(w: jax.Array) -> jax.Array:
     """The matrix ŵ with ŵ v = w × v (Eberly 2024, eq. 26): ``(*batch, 3) -> (*batch, 3, 3)``."""
-    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    x, y, z = components(w)
     o = jnp.zeros_like(x)
     return jnp.stack(
         [jnp.stack([o, -z, y], -1), jnp.stack([z, o, -x], -1), jnp.stack([-y, x, o], -1)],
@@ -98,7 +98,7 @@ def _euler_zyx(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Array]:
     from separately jitted calls gave O(1) round-trip errors at lock, and the asin of
     2(wy − zx) loses half the digits of θ (NaN past ±1). Where B (or A) is exactly 0, it
     is read as 1: ψ = −φ = arg A (or ψ = φ = arg B). A zero quaternion gives (0, 0, 0)."""
-    w, x, y, z = (wxyz[..., i] for i in range(4))
+    w, x, y, z = components(wxyz)
     a_re, a_im, b_re, b_im = w + y, z - x, w - y, z + x
 
     def one_if_zero(re: jax.Array, im: jax.Array) -> jax.Array:
@@ -123,8 +123,8 @@ def _euler_zyx(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Array]:
 
 def quaternion_product(p: jax.Array, q: jax.Array) -> jax.Array:
     """Hamilton product of ``(w, x, y, z)`` quaternions (batch axes broadcast)."""
-    w1, x1, y1, z1 = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    w2, x2, y2, z2 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    w1, x1, y1, z1 = components(p)
+    w2, x2, y2, z2 = components(q)
     return jnp.stack(
         [
             w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
@@ -179,7 +179,7 @@ def jac_right_inv_so3(omega: jax.Array) -> jax.Array:
 def rodrigues_entries(w: jax.Array, a: jax.Array, b: Any, c: jax.Array) -> Entries:
     """The entries of a I + b ŵ + c w wᵀ for ``w`` ``(*batch, 3)`` and coefficients
     ``(*batch,)`` (``b`` may be a number): the form of every SO(3) Jacobian."""
-    w0, w1, w2 = w[..., 0], w[..., 1], w[..., 2]
+    w0, w1, w2 = components(w)
     cw0, cw1, cw2 = c * w0, c * w1, c * w2
     bw0, bw1, bw2 = b * w0, b * w1, b * w2
     return [
@@ -472,7 +472,7 @@ class SO3(SOBase):
         """Rotation matrix of q/|q| (as jaxlie: a non-unit quaternion still gives a
         rotation), ``(*batch, 3, 3)``."""
         q = self.wxyz
-        w, x, y, z = (q[..., i] for i in range(4))
+        w, x, y, z = components(q)
         s = 2.0 / sq_norm(q)
         xx, yy, zz = s * x * x, s * y * y, s * z * z
         xy, xz, yz = s * x * y, s * x * z, s * y * z
@@ -506,6 +506,6 @@ class SO3(SOBase):
     @override
     def _rplus_jacobian(self) -> jax.Array:
         # d/dδ of q ⊗ (1, δ/2) at δ = 0.
-        w, x, y, z = (self.wxyz[..., i] for i in range(4))
+        w, x, y, z = components(self.wxyz)
         rows = [[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]]
         return 0.5 * jnp.stack([jnp.stack(r, -1) for r in rows], -2)

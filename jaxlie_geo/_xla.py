@@ -106,7 +106,7 @@ def materialize_columns(*xs: jax.Array) -> List[jax.Array]:
     into one array they are computed once (SE(3)'s J_r: 431 → 172 ns per element in
     float32, ``docs/design/memory-and-chunks.md``)."""
     stacked = materialize(jnp.stack(xs, axis=-1))
-    return [stacked[..., i] for i in range(len(xs))]
+    return list(jnp.unstack(stacked, axis=-1))
 
 
 Entries = List[List[jax.Array]]
@@ -178,14 +178,15 @@ def matmul_unrolled(A: jax.Array, B: jax.Array) -> jax.Array:
     """``(..., m, n) @ (..., n, k)`` for small m, n, k, written out as multiply-adds (exact
     in any precision mode; a batched 3×3 ``dot`` on XLA:CPU costs several times the fused
     multiply-adds)."""
-    n = A.shape[-1]
+    a = [jnp.unstack(r, axis=-1) for r in jnp.unstack(A, axis=-2)]  # see _scalar.components
+    b = [jnp.unstack(r, axis=-1) for r in jnp.unstack(B, axis=-2)]
     rows = []
-    for i in range(A.shape[-2]):
+    for i in range(len(a)):
         row = []
-        for j in range(B.shape[-1]):
-            acc = A[..., i, 0] * B[..., 0, j]
-            for m in range(1, n):
-                acc = acc + A[..., i, m] * B[..., m, j]
+        for j in range(len(b[0])):
+            acc = a[i][0] * b[0][j]
+            for m in range(1, len(b)):
+                acc = acc + a[i][m] * b[m][j]
             row.append(acc)
         rows.append(jnp.stack(row, axis=-1))
     return jnp.stack(rows, axis=-2)
