@@ -315,9 +315,7 @@ class SE3(SEBase[SO3]):
     def _bracket(cls, a: jax.Array, b: jax.Array) -> jax.Array:
         """[(ρ₁, φ₁), (ρ₂, φ₂)] = (φ₁ × ρ₂ + ρ₁ × φ₂, φ₁ × φ₂)."""
         rho1, phi1, rho2, phi2 = a[..., :3], a[..., 3:], b[..., :3], b[..., 3:]
-        return jnp.concatenate(
-            [cross(phi1, rho2) + cross(rho1, phi2), cross(phi1, phi2)], -1
-        )
+        return jnp.concatenate([cross(phi1, rho2) + cross(rho1, phi2), cross(phi1, phi2)], -1)
 
     # -- fitting --------------------------------------------------------------------
 
