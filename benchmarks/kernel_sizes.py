@@ -17,8 +17,9 @@ compile; the minimum of ``--repeats``). The count is what XLA emits code for: co
 and the size of a user's program grow with it. It depends on the jax/XLA version, not on the
 machine's speed.
 
-``tests/kernel_sizes.json`` records the counts of the jax version the suite runs on;
-``tests/test_kernel_sizes.py`` fails when a kernel grows more than 20% past its record.
+``tests/kernel_sizes.json`` records the counts per jax version (``--record`` adds or
+replaces the running version's); ``tests/test_kernel_sizes.py`` fails when a kernel grows
+more than 20% past its record for the jax it runs on.
 
 Usage:
   python -m benchmarks.kernel_sizes                   # prints the table
@@ -126,8 +127,10 @@ def main(argv=None) -> int:
                 )
     if args.record:
         sizes = {f"{r['group']}.{r['op']}.{r['dtype']}": r["instructions"] for r in rows}
-        C.write_json(RECORD, {"jax": jax.__version__, "batch": N, "instructions": sizes})
-        print(f"wrote {RECORD}")
+        record = C.read_json(RECORD) if RECORD.exists() else {"batch": N, "instructions": {}}
+        record["instructions"].setdefault(jax.__version__, {}).update(sizes)
+        C.write_json(RECORD, record)
+        print(f"wrote {RECORD} (jax {jax.__version__})")
     from benchmarks.report import save
 
     info = C.machine_info("benchmarks.kernel_sizes", batch=N, repeats=args.repeats)

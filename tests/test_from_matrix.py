@@ -394,7 +394,7 @@ def test_planar_nearest_rotation(G):
 
 
 def _svd_nearest_jax(M):
-    U, _, Vt = jnp.linalg.svd(M)
+    U, _, Vt = jnp.linalg.svd(M, full_matrices=False)  # square: the same; jax 0.5.3's JVP
     d = jnp.sign(jnp.linalg.det(U @ Vt))
     n = M.shape[-1]
     D = jnp.diag(jnp.concatenate([jnp.ones(n - 1, M.dtype), d[None]]))
