@@ -473,7 +473,7 @@ class SO3(SOBase):
         rotation), ``(*batch, 3, 3)``."""
         q = self.wxyz
         w, x, y, z = components(q)
-        s = 2.0 / sq_norm(q)
+        s = 2.0 / (w * w + x * x + y * y + z * z)  # sq_norm(q)
         xx, yy, zz = s * x * x, s * y * y, s * z * z
         xy, xz, yz = s * x * y, s * x * z, s * y * z
         wx, wy, wz = s * w * x, s * w * y, s * w * z
