@@ -1,7 +1,8 @@
 """An inverse-kinematics-sized program, compiled and run on jaxlie_geo and on jaxlie 1.5.
 
 The program a robotics user jits: forward kinematics of a 7-joint serial chain (revolute
-joints about each link's z axis, fixed link transforms between them: 14 SE3 products),
+joints about each link's z axis, fixed link transforms between them: 13 SE3 products, and
+one more in the residual),
 the log of the pose residual r(q) = log(T_target⁻¹ · fk(q)), its Jacobian by
 ``jax.jacfwd``, and one damped Gauss–Newton step q ← q − (JᵀJ + λI)⁻¹ Jᵀr, λ = 10⁻⁶; for
 one problem and vmapped over B = 1,000 targets, in float32. The same source runs on both

@@ -341,8 +341,8 @@ class MatrixLieGroup(abc.ABC):
         ``exp(t · log(other @ self⁻¹)) @ self`` (*Lie Groups and Lie Algebras*, 2024, eq. 9)
         except where the relative rotation is exactly π, and which does not lose
         ε·|translation| to cancellation far from the origin. At a relative rotation of
-        exactly π the principal log's tie-break applies (quaternion with w = 0 as stored:
-        the axis is the stored one).
+        exactly π the principal log's tie-break applies (quaternion with w = 0: −π times
+        the stored vector part's direction, as jaxlie).
 
         Args:
             other: end point; batch axes broadcast with ``self``.

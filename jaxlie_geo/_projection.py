@@ -225,7 +225,7 @@ def nearest_quaternion(m: jax.Array) -> jax.Array:
     is ≥ 0). Where the nearest rotation is not unique (d2 + d3 = 0: the zero matrix, rank 1,
     orthogonal reflections), one of the nearest; for a diagonal ``m``, the basis vector at
     the first largest diagonal entry of K (the identity for 0, diag(1, 0, 0) and
-    diag(1, 1, −1); the half turn about x for −I).
+    diag(1, 1, −1); the half turn about x for −I). A NaN or inf entry gives NaN.
 
     Args:
         m: ``(*batch, 3, 3)``, floating; any matrix.
@@ -245,6 +245,8 @@ def nearest_quaternion(m: jax.Array) -> jax.Array:
     day = jnp.where(d2 < 0, jnp.where(d0 > d1, col[1], col[2]),
                     jnp.where(d0 < -d1, col[3], col[0]))  # fmt: skip
     sign = jnp.where(day < 0, -1.0, 1.0).astype(m.dtype)
+    # A NaN or inf entry gives NaN (the guards above would otherwise return a rotation).
+    sign = jnp.where(jnp.isfinite(_sum(x for row in r for x in row)), sign, jnp.nan)
     return jnp.moveaxis(jnp.stack([sign * (x / norm) for x in col]), 0, -1)
 
 
@@ -308,8 +310,11 @@ def rotation_quaternion(m: jax.Array) -> jax.Array:
     (module docstring). For a rotation, within a few ulp of jaxlie's ``from_matrix``; for
     M = R(I + E), a unit quaternion within O(‖E‖²) of the nearest rotation's; for a matrix
     far from every rotation, a unit quaternion that need not be the nearest (the identity
-    where the power step gives 0, as for the zero matrix). Entries beyond about 1e18
-    (float32) overflow in the final norm.
+    for the zero matrix). Day's branch makes the chosen component t ≥ 1 for every matrix,
+    so nothing divides by zero; a NaN or inf entry gives NaN. The norm squares entries
+    of order ‖M‖² · ‖M‖^(1/2) or, where t stays near 1, ‖M‖⁴: beyond about 1e9 in float32
+    (1e76 in float64) it overflows and the result is NaN (``nearest_quaternion`` scales
+    first).
 
     Args:
         m: ``(*batch, 3, 3)``, floating.
@@ -337,13 +342,10 @@ def rotation_quaternion(m: jax.Array) -> jax.Array:
 
     x, y, z, w = ((t, *column(j, t)) for t, j in cases)
     t, *col = pick(pick(x, y, x_or_y), pick(z, w, z_or_w), m22 < 0)
-    half = 0.5 / jnp.sqrt(jnp.where(t > 0, t, 1.0))
+    half = 0.5 / jnp.sqrt(t)  # t ≥ 1 on Day's branch
     q1 = _times(k, jnp.ones_like(t), [c * half for c in col])  # (K + I) q₀
-    norm = jnp.sqrt(_sum(v * v for v in q1))
-    ok = norm > 0
-    inv = 1.0 / jnp.where(ok, norm, 1.0)
-    out = [jnp.where(ok, v * inv, 1.0 if i == 0 else 0.0) for i, v in enumerate(q1)]
-    return jnp.moveaxis(jnp.stack(out), 0, -1)
+    inv = 1.0 / jnp.sqrt(_sum(v * v for v in q1))  # ≥ q1_j ≥ ½: never 0
+    return jnp.moveaxis(jnp.stack([v * inv for v in q1]), 0, -1)
 
 
 def rotation_unit_complex(m: jax.Array) -> jax.Array:

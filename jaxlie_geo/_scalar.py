@@ -193,7 +193,7 @@ def components(x: jax.Array) -> Tuple[jax.Array, ...]:
     """The entries of ``x`` along its last axis, each ``(*batch,)``, in one ``unstack``:
     the same values as ``x[..., i]``, but reverse-mode differentiation transposes them into
     one concatenation, where per-index slices transpose into a pad and an addition each
-    (a third of the instructions of a spline's gradient)."""
+    (``docs/design/compile-time.md``)."""
     return tuple(jnp.unstack(x, axis=-1))
 
 

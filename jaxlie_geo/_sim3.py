@@ -19,7 +19,7 @@ from ._alignment import umeyama_parts
 from ._base import MatrixLieGroup, block_matrix
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
 from ._pytree import pytree_dataclass
-from ._scalar import components, dot, sq_norm
+from ._scalar import components, dot, pow2_inverse, sq_norm
 from ._so3 import (
     SO3,
     cross,
@@ -380,7 +380,11 @@ class Sim3(MatrixLieGroup):
             R = SO3.from_matrix(M, project=True)
             s = jnp.sum(R.as_matrix() * M, axis=(-2, -1)) / 3.0
         else:
-            s = jnp.sqrt(jnp.sum(M * M, axis=(-2, -1)) / 3.0)
+            # ‖M‖_F/√3 of M scaled by a power of two (exact), so that the squares neither
+            # overflow nor underflow over the whole range of the dtype.
+            big = jax.lax.stop_gradient(jnp.max(jnp.abs(M), axis=(-2, -1)))
+            c = pow2_inverse(big)[..., None, None]
+            s = jnp.sqrt(jnp.sum((M * c) ** 2, axis=(-2, -1)) / 3.0) / c[..., 0, 0]
             ok = s > 0
             R = SO3.from_matrix(M / jnp.where(ok, s, 1.0)[..., None, None])
         return cls._assemble("Sim3.from_matrix", R.wxyz, m[..., :3, 3], jnp.log(s))

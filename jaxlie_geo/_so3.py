@@ -63,8 +63,8 @@ def log_quaternion(wxyz: jax.Array) -> jax.Array:
 
 
 def log_quaternion_parts(wxyz: jax.Array) -> Tuple[jax.Array, jax.Array, jax.Array]:
-    """(u, s, h) with ω = log(q) = s·u: u the stored vector part (sign-flipped so that
-    w ≥ 0, exact), s = θ/‖u‖ = 2 atan2(‖u‖, |w|)/‖u‖, and h = (θ/2)cot(θ/2) read off the same
+    """(u, s, h) with ω = log(q) = s·u: u the stored vector part (sign-flipped where
+    w ≤ 0, exact), s = θ/‖u‖ = 2 atan2(‖u‖, |w|)/‖u‖, and h = (θ/2)cot(θ/2) read off the same
     quaternion as |w| · atan2(‖u‖, |w|)/‖u‖ — no cancellation anywhere on [0, π], unlike
     1 − θ² G, which cancels as h → 0 near π. All three depend on q's direction only, as the
     rotation does (a drifted, non-unit q). Formulas built on (u, s) rather than the rounded
@@ -418,8 +418,8 @@ class SO3(SOBase):
         ω = 2 atan2(‖u‖, w)/‖u‖ · u (``log_quaternion``). Unlike the trace/acos form
         (Eberly 2024, §9.2), which loses about √ε in the angle near π, it is accurate up to
         and at π; at exactly π (w = 0) ω is −π times the stored vector part's direction, as
-        in jaxlie. It
-        depends on q's direction only (a drifted, non-unit q gives the log of q/|q|)."""
+        in jaxlie. It depends on q's direction only (a drifted, non-unit q gives the log of
+        q/|q|)."""
         return log_quaternion(self.wxyz)
 
     @override

@@ -135,8 +135,8 @@ def _noiseless(seed: int, rigid: bool = False):
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
 def test_recovers_a_known_similarity(dtype):
     """Noiseless points of 64 random similarities, rounded to ``dtype``: R, s and t within
-    16 ulp (the rotation is ``SO3.from_matrix``'s projection of the covariance), the dtype
-    preserved."""
+    16 ulp (the rotation is the projection ``SO3.from_matrix(·, project=True)`` of the
+    covariance), the dtype preserved."""
     eps = float(jnp.finfo(dtype).eps)
     x, y, (R0, t0, s0) = _noiseless(2)
     R, t, s = umeyama(jnp.asarray(x, dtype), jnp.asarray(y, dtype))

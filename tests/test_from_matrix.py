@@ -227,8 +227,9 @@ def test_agrees_with_scipy(dtype, noise):
 @pytest.mark.parametrize("project", [False, True], ids=["convert", "project"])
 def test_rotations_agree_with_jaxlie(dtype, project):
     """For rotation matrices (20 000 random, half turns with w = 0 and near-identity ones
-    included), the quaternion is jaxlie's (Shepperd's formulas) within 3 ulp (measured 1.5
-    in float32, 2.0 in float64), with the same sign."""
+    included), the quaternion is jaxlie's (Shepperd's formulas) within 4 ulp, with the same
+    sign (measured, largest component: the conversion 3.0 in float32 and 2.5 in float64 over
+    10⁵ rotations; the projection 1.5 and 2.0)."""
     q = np.random.default_rng(11).normal(size=(20000, 4))
     q[:2000, 0] = 0.0
     q[2000:4000, 1:] *= 1e-4
@@ -236,7 +237,7 @@ def test_rotations_agree_with_jaxlie(dtype, project):
     M = np.asarray(jl.SO3(jnp.asarray(q, dtype)).as_matrix())
     ours = to_np(jl.SO3.from_matrix(M, project=project).wxyz)
     ref = to_np(jaxlie_ref.SO3.from_matrix(jnp.asarray(M)).wxyz)
-    assert np.max(np.abs(ours - ref)) <= 3 * np.finfo(dtype).eps
+    assert np.max(np.abs(ours - ref)) <= 4 * np.finfo(dtype).eps
 
 
 # ---------------------------------------------------------------------------------
@@ -382,7 +383,7 @@ def test_planar_nearest_rotation(G):
     # The conversion signs a zero sine as m10, as jaxlie's first column: −I with −0.0 (as
     # numpy writes -np.eye(2)) is the angle −π there, +0.0 the angle π.
     for zero in (0.0, -0.0):
-        M = np.array([[-1.0, -zero], [zero, -1.0]])
+        M = np.array([[-1.0, zero], [zero, -1.0]])  # m10 − m01 = +0.0 for either zero
         ours = jl.SO2.from_matrix(M).unit_complex
         ref = jaxlie_ref.SO2.from_matrix(jnp.asarray(M)).unit_complex
         assert np.array_equal(np.signbit(to_np(ours)), np.signbit(to_np(ref))), (ours, ref)
@@ -483,8 +484,9 @@ def _switch_rotations():
             out.append(
                 Rotation.from_rotvec(angle * np.asarray(axis) / np.linalg.norm(axis)).as_matrix()
             )
-    out.append(Rotation.from_rotvec([0.0, 0.0, np.pi / 2]).as_matrix())
-    out.append(Rotation.from_rotvec([np.pi / 2, 0.0, 0.0]).as_matrix())
+    # The quarter turns about x and z with exact entries: m22 = 0 and m00 = −m11 = 0 exactly.
+    out.append(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]))
+    out.append(np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
     return np.stack(out)
 
 
@@ -514,7 +516,7 @@ def test_conversion_is_second_order_near_the_rotations(G):
 
 
 def test_conversion_of_a_similarity_is_second_order():
-    """Sim3: M = sR(I + εN) with s from 1e-3 to 1e3: the scale and the rotation are the
+    """Sim3: M = s(R + εN) with s from 1e-3 to 1e3: the scale and the rotation are the
     nearest similarity's (the polar factor, and tr(RᵀM)/3) within 4ε² relative (measured
     3.3ε²)."""
     R = Rotation.random(200, random_state=23).as_matrix()
@@ -564,3 +566,27 @@ def test_conversion_far_from_the_rotations_is_a_rotation(dtype):
     np.testing.assert_allclose(
         np.linalg.norm(q, axis=-1), 1.0, rtol=0, atol=4 * np.finfo(dtype).eps
     )
+
+
+@over_dtypes
+def test_conversion_of_a_similarity_over_the_whole_scale_range(dtype):
+    """Sim3's scale from ‖M‖_F/√3 holds over the dtype's range: log-scales ±80 (float32
+    scales from 2e-35 to 6e34) come back within 4 ulp of 80, the rotation within 8 ulp, from
+    the matrix of the element."""
+    eps = float(jnp.finfo(dtype).eps)
+    for sigma in (-80.0, -40.0, 40.0, 80.0):
+        T = jl.Sim3.exp(jnp.asarray([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, sigma], dtype))
+        U = jl.Sim3.from_matrix(T.as_matrix())
+        assert abs(float(U.log_scale()) - sigma) <= 4 * eps * 80, (sigma, U.log_scale())
+        err = np.abs(to_np(U.rotation().as_matrix()) - to_np(T.rotation().as_matrix())).max()
+        assert err <= 8 * eps, (sigma, err)
+
+
+@pytest.mark.parametrize("project", [False, True], ids=["convert", "project"])
+def test_non_finite_matrices_give_nan(project):
+    """A NaN or inf entry gives a NaN quaternion with either setting, never a silent
+    rotation."""
+    for bad in (np.nan, np.inf):
+        M = np.eye(3)
+        M[1, 2] = bad
+        assert np.all(np.isnan(to_np(jl.SO3.from_matrix(M, project=project).wxyz))), bad
