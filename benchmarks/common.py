@@ -33,6 +33,19 @@ PAGE = HERE / "RESULTS.md"
 GROUPS = ("SO2", "SE2", "SO3", "SE3")
 OPS = ("exp", "log", "compose", "apply", "inverse", "interpolate", "grad")
 
+#: The operations of ``matrix_ops.py`` and of ``kernel_sizes.py``, in the page's order (the
+#: scripts and ``report.py`` read them from here).
+MATRIX_OPS = (
+    "jac_right",
+    "jac_right_inv",
+    "jlog",
+    "adjoint",
+    "grad",
+    "from_matrix",
+    "from_matrix_project",
+)
+KERNEL_OPS = ("exp", "log", "jac_right", "jac_right_inv", "jlog", "grad", "from_matrix")
+
 #: jaxlie's layouts: tangent dimension, the tangent's rotation slice, the dimension of the
 #: space acted on and the quaternion slice of the parameters.
 GROUP_INFO = {

@@ -37,7 +37,7 @@ from benchmarks import common as C
 from jaxlie_geo._xla import x64
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
-OPS = ("exp", "log", "jac_right", "jac_right_inv", "jlog", "grad", "from_matrix")
+OPS = C.KERNEL_OPS
 DTYPES = ("float32", "float64")
 N = 1000
 RECORD = C.REPO_ROOT / "tests" / "kernel_sizes.json"

@@ -47,15 +47,7 @@ from benchmarks.report import save
 from jaxlie_geo._xla import x64
 
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
-OPS = (
-    "jac_right",
-    "jac_right_inv",
-    "jlog",
-    "adjoint",
-    "grad",
-    "from_matrix",
-    "from_matrix_project",
-)
+OPS = C.MATRIX_OPS
 JAXLIE_GROUPS = ("SO2", "SE2", "SO3", "SE3")
 JAXLIE_OPS = ("jlog", "adjoint", "grad", "from_matrix")
 ROUNDS = 5

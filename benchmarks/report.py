@@ -753,15 +753,7 @@ def _change_table(before: dict, after: dict) -> list:
     return lines + table(header, body, align) + [""]
 
 
-MATRIX_OPS = (
-    "jac_right",
-    "jac_right_inv",
-    "jlog",
-    "adjoint",
-    "grad",
-    "from_matrix",
-    "from_matrix_project",
-)
+MATRIX_OPS = C.MATRIX_OPS
 MATRIX_GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
 MATRIX_METHOD = """\
 `benchmarks/matrix_ops.py`: every group's Jacobians, `jlog`, adjoint, the gradient of
@@ -836,7 +828,7 @@ def _matrix_ops_table(info: dict, dtype: str, rows: list) -> list:
     return lines + table(header, body, align) + [""]
 
 
-KERNEL_OPS = ("exp", "log", "jac_right", "jac_right_inv", "jlog", "grad", "from_matrix")
+KERNEL_OPS = C.KERNEL_OPS
 KERNEL_METHOD = """\
 `benchmarks/kernel_sizes.py`: each operation on a batch of 1,000, compiled by `jax.jit`;
 instructions of the optimised HLO (every computation, fused ones included) and compile

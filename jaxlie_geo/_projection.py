@@ -311,10 +311,10 @@ def rotation_quaternion(m: jax.Array) -> jax.Array:
     M = R(I + E), a unit quaternion within O(‖E‖²) of the nearest rotation's; for a matrix
     far from every rotation, a unit quaternion that need not be the nearest (the identity
     for the zero matrix). Day's branch makes the chosen component t ≥ 1 for every matrix,
-    so nothing divides by zero; a NaN or inf entry gives NaN. The norm squares entries
-    of order ‖M‖² · ‖M‖^(1/2) or, where t stays near 1, ‖M‖⁴: beyond about 1e9 in float32
-    (1e76 in float64) it overflows and the result is NaN (``nearest_quaternion`` scales
-    first).
+    so nothing divides by zero; a NaN or inf entry gives NaN. The power step's entries
+    grow as ‖M‖^(3/2) (as ‖M‖² where t stays near 1), and their squares overflow for
+    entries beyond about 1e9 in float32 (1e76 in float64): the result is then NaN
+    (``nearest_quaternion`` scales first).
 
     Args:
         m: ``(*batch, 3, 3)``, floating.
