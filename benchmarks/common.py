@@ -217,6 +217,29 @@ def pretty_n(n: int) -> str:
     return text
 
 
+def fmt_ratio(x: float) -> str:
+    """A speed-up as the pages print it: three significant digits (two decimals below 10)."""
+    return f"{x:.2f}" if x < 10 else f"{x:.1f}" if x < 100 else f"{x:.0f}"
+
+
+def fmt_ulp(e: float | None) -> str:
+    """An error in ulp as the accuracy tables print it: "–" for none, 3 significant digits."""
+    if e is None or (isinstance(e, float) and math.isnan(e)):
+        return "–"
+    if not math.isfinite(e):
+        return "non-finite"
+    if e < 10:
+        return f"{e:.2f}"
+    if e < 1000:
+        return f"{e:.0f}"
+    return f"{e:.1e}"
+
+
+def sizes(data: dict) -> list:
+    """The batch sizes of a run's results, ascending."""
+    return sorted({r["n"] for r in data["results"]})
+
+
 def geomean(xs) -> float:
     xs = [x for x in xs if x > 0]
     return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else float("nan")

@@ -11,15 +11,16 @@ The raw results are JSON files, one per machine and table::
     benchmarks/raw/<machine>/splines-<dtype>.json   splines.py --save
     benchmarks/raw/<machine>/pose-graphs.json       pose_graphs.py --save
     benchmarks/raw/<machine>/spline-fit.json        spline_fit.py --save
-    benchmarks/raw/<machine>/baseline-speed-<dtype>.json
-                                                     run.py --json of an earlier commit,
-                                                     with a "change" entry: the page shows
-                                                     it beside today's run, before/after
+    benchmarks/raw/<machine>/matrix-ops.json        matrix_ops.py --save
+    benchmarks/raw/<machine>/kernel-sizes.json      kernel_sizes.py --save
+    benchmarks/raw/<machine>/ik-program.json        ik_program.py --save
 
 Each benchmark script, given ``--save``, replaces its file for the machine it runs on and
 calls ``write_page``; ``python -m benchmarks.report`` re-renders the page alone. The page
 depends on the raw files only (no clock, no environment), so rendering twice gives the same
-bytes; ``--check`` exits with status 1 when the committed page is out of date.
+bytes. The README and the guides (``COPIES``) show some of the same figures in blocks marked
+``<!-- rendered by benchmarks/report.py: NAME -->``, which the same run rewrites from the same
+files (``excerpts``); ``--check`` exits with status 1 when the page or any block is stale.
 
 Usage:
   python -m benchmarks.report                  # raw/ -> RESULTS.md and results.png
@@ -36,8 +37,7 @@ import sys
 from pathlib import Path
 
 from benchmarks import common as C
-from benchmarks.common import GROUPS, OPS, fmt_ns, geomean, label, pretty_n, table
-from jaxlie_geo._mpref import fmt_ulp
+from benchmarks.common import GROUPS, OPS, fmt_ns, fmt_ulp, geomean, label, pretty_n, table
 
 PLOT_NAME = "results.png"
 POSE_GRAPH_PLOT = "pose_graphs.png"
@@ -691,68 +691,6 @@ def _splines_table(data: dict) -> list:
     return lines + [f"- {note}" for note in notes] + [""]
 
 
-def change_section(raw: dict, order: list) -> list:
-    """Before and after a change: a baseline run of an earlier commit (``baseline-speed-*``,
-    with its ``change`` entry) beside today's run on the same machine."""
-    pairs = [
-        (raw[m][f"baseline-speed-{dt}"], raw[m][f"speed-{dt}"])
-        for m in order
-        for dt in ("float32", "float64")
-        if f"baseline-speed-{dt}" in raw[m] and f"speed-{dt}" in raw[m]
-    ]
-    if not pairs:
-        return []
-    change = pairs[0][0]["change"]
-    lines = [f"## Before and after: {change['title']}", "", change["text"], ""]
-    for before, after in pairs:
-        lines += _change_table(before, after)
-    return lines
-
-
-def _change_table(before: dict, after: dict) -> list:
-    old = {(r["group"], r["op"], r["n"]): r for r in before["results"]}
-    new = {(r["group"], r["op"], r["n"]): r for r in after["results"]}
-    sizes = sorted({k[2] for k in old if k in new and k[2] > 1})
-    cases = [(g, o) for g in GROUPS for o in OPS if any((g, o, n) in old for n in sizes)]
-    header, align = ["group", "op"], "ll"
-    for n in sizes:
-        header += [f"{pretty_n(n)}: jaxlie_geo", f"{pretty_n(n)}: speed-up"]
-        align += "rr"
-    top = sizes[-1]
-    header.append(f"compile ms at {pretty_n(top)} (jaxlie)")
-    align += "r"
-    body = []
-    for g, o in cases:
-        row = [g, o]
-        for n in sizes:
-            a, b = old.get((g, o, n)), new.get((g, o, n))
-            if a and b:
-                row += [
-                    f"{fmt_ns(a['geo_ns_per_elem'])} → {fmt_ns(b['geo_ns_per_elem'])}",
-                    f"{a['ratio']:.2f} → {b['ratio']:.2f}",
-                ]
-            else:
-                row += ["", ""]
-        a, b = old.get((g, o, top)), new.get((g, o, top))
-        row.append(
-            f"{a['compile_geo_ms']:.0f} → {b['compile_geo_ms']:.0f} ({b['compile_ref_ms']:.0f})"
-            if a and b
-            else ""
-        )
-        body.append(row)
-    info, was = after["machine"], before["machine"]
-    dtype = info.get("dtype", "?")
-    lines = [
-        f"### {label(info)}, {dtype}",
-        "",
-        f"Before: commit {_commit(was)}, measured {_date(was)}; after: commit "
-        f"{_commit(info)}, measured {_date(info)}; jax {info.get('jax', '?')}. Time "
-        "per element of jaxlie_geo, and its speed-up over jaxlie measured in the same run.",
-        "",
-    ]
-    return lines + table(header, body, align) + [""]
-
-
 MATRIX_OPS = C.MATRIX_OPS
 MATRIX_GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
 MATRIX_METHOD = """\
@@ -934,16 +872,7 @@ def accuracy_section(raw: dict, order: list) -> list:
 
 
 def _accuracy_tables(data: dict) -> list:
-    info, bounds, libs = data["machine"], data["bounds"], data["libs"]
-    cells = {
-        (c["lib"], c["group"], c["op"], c["dtype"], c["regime"]): (
-            c["ulp"],
-            c.get("over", c["ulp"] is None or not c["ulp"] <= bounds[c["op"]]),
-        )
-        for c in data["cells"]
-    }
-    groups = [g for g in data.get("groups", GROUPS) if any(k[1] == g for k in cells)]
-    dtypes = [d for d in ("float32", "float64") if any(k[3] == d for k in cells)]
+    info, libs = data["machine"], data["libs"]
     lines = [
         f"### {label(info)}",
         "",
@@ -952,31 +881,49 @@ def _accuracy_tables(data: dict) -> list:
         "**bold**: a case over its bound.",
         "",
     ]
-
-    def cell(v, over):
-        return f"**{fmt_ulp(v)}**" if over else fmt_ulp(v)
-
-    for dt in dtypes:
-        body = []
-        for g in groups:
-            for op, op_label in data["ops"].items():
-                row = [g, op_label]
-                for reg in data["regimes"]:
-                    vals = [cells.get((lib, g, op, dt, reg["key"])) for lib in libs]
-                    row.append(
-                        ""
-                        if all(v is None for v in vals)
-                        else " / ".join(cell(*(v or (None, False))) for v in vals)
-                    )
-                body.append(row)
-        header = ["group", "op"] + [r["label"] for r in data["regimes"]]
-        lines += [f"**{dt}**", ""]
-        lines += table(header, body, "ll" + "r" * len(data["regimes"])) + [""]
+    for dt in ("float32", "float64"):
+        grid = _accuracy_grid(data, dt)
+        if grid:
+            lines += [f"**{dt}**", "", *grid, ""]
     for note in data.get("notes", []):
         lines += [note, ""]
     for section in data.get("sections", []):  # Markdown tables accuracy.py renders itself
         lines += [f"**{section['title']}**", "", *section["lines"], ""]
     return lines
+
+
+def _accuracy_grid(data: dict, dtype: str) -> list:
+    """The table of worst errors of one dtype: group × op rows, regime columns."""
+    bounds, libs = data["bounds"], data["libs"]
+    cells = {
+        (c["lib"], c["group"], c["op"], c["dtype"], c["regime"]): (
+            c["ulp"],
+            c.get("over", c["ulp"] is None or not c["ulp"] <= bounds[c["op"]]),
+        )
+        for c in data["cells"]
+        if c["dtype"] == dtype
+    }
+    if not cells:
+        return []
+    groups = [g for g in data.get("groups", GROUPS) if any(k[1] == g for k in cells)]
+
+    def cell(v, over):
+        return f"**{fmt_ulp(v)}**" if over else fmt_ulp(v)
+
+    body = []
+    for g in groups:
+        for op, op_label in data["ops"].items():
+            row = [g, op_label]
+            for reg in data["regimes"]:
+                vals = [cells.get((lib, g, op, dtype, reg["key"])) for lib in libs]
+                row.append(
+                    ""
+                    if all(v is None for v in vals)
+                    else " / ".join(cell(*(v or (None, False))) for v in vals)
+                )
+            body.append(row)
+    header = ["group", "op"] + [r["label"] for r in data["regimes"]]
+    return table(header, body, "ll" + "r" * len(data["regimes"]))
 
 
 POSE_GRAPHS_METHOD = """\
@@ -1133,6 +1080,199 @@ def spline_fit_section(raw: dict, order: list) -> list:
     return lines
 
 
+# --------------------------------------------------------------------------------------
+# Rendered copies: the figures that the README and the guides show, from the same raw files
+# --------------------------------------------------------------------------------------
+
+#: The files outside this folder that hold rendered blocks, relative to the repository root.
+COPIES = ("README.md", "docs/speed.md", "docs/accuracy.md")
+_BLOCK = re.compile(
+    r"(<!-- rendered by benchmarks/report\.py: ([\w-]+) -->\n)(.*?)"
+    r"(<!-- end of rendered block -->)",
+    re.S,
+)
+_SUMMARY_ROWS = (
+    ("SE3", "exp", "SE3 exp"),
+    ("SE3", "log", "SE3 log"),
+    ("SE3", "compose", "SE3 compose"),
+    ("SE3", "apply", "SE3 apply"),
+    ("SE3", "interpolate", "SE3 interpolate"),
+    ("SE3", "grad", "SE3 gradient through exp, log, compose"),
+)
+_README_ROWS = ("SE3 exp", "SE3 log", "SE3 interpolate")
+_COMPILE_ROWS = [(g, o) for g in ("SO3", "SE3") for o in ("exp", "log", "interpolate", "grad")]
+#: The accuracy regimes of the README's summary: 0 to π, every translation norm.
+_BELOW_PI = ("zero", "tiny", "small", "mid", "near_pi")
+
+
+def _ratio(res: list, group: str, op: str, n: int) -> str:
+    r = next((r for r in res if (r["group"], r["op"], r["n"]) == (group, op, n)), None)
+    return C.fmt_ratio(r["ratio"]) if r else ""
+
+
+def _summary_table(f32: dict, f64: dict | None, names: tuple) -> list:
+    """Speed-ups of the chosen SE3 rows and the geometric mean over every group and op, per
+    batch size of the float32 run, plus the float64 run's largest size when given."""
+    columns = [(f32["results"], n, f"N = {pretty_n(n)}") for n in C.sizes(f32)]
+    if f64 is not None:
+        n = C.sizes(f64)[-1]
+        columns.append((f64["results"], n, f"N = {pretty_n(n)}, float64"))
+    body = [
+        [name] + [_ratio(res, g, o, n) for res, n, _ in columns]
+        for g, o, name in _SUMMARY_ROWS
+        if name in names
+    ]
+    body.append(
+        ["all groups and ops, geometric mean"]
+        + [C.fmt_ratio(geomean([r["ratio"] for r in res if r["n"] == n])) for res, n, _ in columns]
+    )
+    return table([""] + [h for _, _, h in columns], body, "l" + "r" * len(columns))
+
+
+def _where(info: dict) -> str:
+    return f"{label(info)}, jax {info.get('jax', '?')}"
+
+
+def excerpts(raw: dict) -> dict:
+    """Each rendered block's Markdown, by name; empty when its raw file is missing."""
+    order = machine_order(raw)
+    runs = {k: d for m in order[:1] for k, d in raw[m].items()}
+    f32, f64 = runs.get("speed-float32"), runs.get("speed-float64")
+    blocks = {}
+    if f32:
+        info = f32["machine"]
+        blocks["readme-speed"] = [
+            "Speed-up over jaxlie (jaxlie time / jaxlie_geo time, both under `jax.jit`; "
+            f"{_where(info)}, float32; [more](docs/speed.md)):",
+            "",
+            *_summary_table(f32, None, _README_ROWS),
+        ]
+        blocks["speed-summary"] = [
+            f"{_where(info)}; float32, and float64 at {pretty_n(C.sizes(f64)[-1])}:"
+            if f64
+            else f"{_where(info)}; float32:",
+            "",
+            *_summary_table(f32, f64, tuple(name for *_, name in _SUMMARY_ROWS)),
+        ]
+        slower = []
+        for data in (f32, f64):
+            if data:
+                dt = data["machine"].get("dtype", "float32")
+                slower += [
+                    f"- {r['group']} {r['op']} at {_n_at(r['n'])}, {dt}: {r['ratio']:.2f}"
+                    for r in sorted(data["results"], key=lambda r: r["ratio"])
+                    if _slower(r)
+                ]
+        blocks["speed-slower"] = slower or ["- none in these runs"]
+        top = C.sizes(f32)[-1]
+        by = {(r["group"], r["op"]): r for r in f32["results"] if r["n"] == top}
+        blocks["speed-compile"] = [
+            f"At {pretty_n(top)} in float32, in ms ({_where(info)}):",
+            "",
+            *table(
+                ["", "jaxlie_geo", "jaxlie"],
+                [
+                    [
+                        f"{g} {o}",
+                        f"{by[g, o]['compile_geo_ms']:.0f}",
+                        f"{by[g, o]['compile_ref_ms']:.0f}",
+                    ]
+                    for g, o in _COMPILE_ROWS
+                    if (g, o) in by
+                ],
+                "lrr",
+            ),
+        ]
+        memory = f32.get("memory")
+        if memory:
+            blocks["speed-memory"] = [
+                f"SE3 operations at N = {pretty_n_pow2(memory[0]['n'])}, float32, MB "
+                f"({_where(info)}; compiled, not run):",
+                "",
+                *table(
+                    ["op", "arguments", "output", "temporaries: jaxlie_geo", "temporaries: jaxlie"],
+                    memory_rows(memory),
+                    "lrrrr",
+                ),
+            ]
+    jac = runs.get("jacobians-float32")
+    if jac:
+        ratios = [r["ratio"] for r in jac["results"]]
+        n = max(r["n"] for r in jac["results"])
+        blocks["speed-jacobians"] = [
+            f"At {pretty_n(n)} elements in float32 ({_where(jac['machine'])}) the closed forms run "
+            f"{min(ratios):.1f}x–{max(ratios):.0f}x faster than `jax.jacfwd`, "
+            f"{geomean(ratios):.1f}x in geometric mean over {len(ratios)} Jacobians."
+        ]
+    acc = runs.get("accuracy")
+    if acc:
+        blocks["readme-accuracy"] = _accuracy_summary(acc)
+        for dt in ("float32", "float64"):
+            blocks[f"accuracy-{dt}"] = [
+                f"**{dt}** (cells: jaxlie_geo / jaxlie; {_where(acc['machine'])}, measured "
+                f"{_date(acc['machine'])})",
+                "",
+                *_accuracy_grid(acc, dt),
+            ]
+        for i, section in enumerate(acc.get("sections", [])):
+            blocks[f"accuracy-section-{i + 1}"] = [f"**{section['title']}**", "", *section["lines"]]
+    return {k: "\n".join(v) + "\n" for k, v in blocks.items()}
+
+
+def _accuracy_summary(data: dict) -> list:
+    """Worst error of each library over jaxlie's four groups, angles 0 to π."""
+    rows = (
+        (("exp", "log"), "exp, log"),
+        (("jac",), "d log(exp x)/dx"),
+        (("hess",), "d² log(exp x)/dx²"),
+    )
+    header = [""] + [f"{lib}, {dt}" for dt in ("float32", "float64") for lib in data["libs"]]
+
+    def worst(lib, dt, ops):
+        vals = [
+            c["ulp"]
+            for c in data["cells"]
+            if (c["lib"], c["dtype"]) == (lib, dt)
+            and c["op"] in ops
+            and c["regime"] in _BELOW_PI
+            and c["group"] in ("SO2", "SE2", "SO3", "SE3")
+            and c["ulp"] is not None
+        ]
+        return fmt_ulp(max(vals)) if vals else ""
+
+    body = [
+        [name] + [worst(lib, dt, ops) for dt in ("float32", "float64") for lib in data["libs"]]
+        for ops, name in rows
+    ]
+    return table(header, body, "l" + "r" * (len(header) - 1))
+
+
+def render_copy(text: str, blocks: dict, name: str = "") -> str:
+    """``text`` with every rendered block replaced by its current Markdown."""
+
+    def fill(m: re.Match) -> str:
+        if m[2] not in blocks:
+            raise KeyError(f"{name}: no rendered block named {m[2]!r} (known: {sorted(blocks)})")
+        return m[1] + blocks[m[2]] + m[4]
+
+    return _BLOCK.sub(fill, text)
+
+
+def stale_copies(raw: dict, root: Path = C.REPO_ROOT, write: bool = False) -> list:
+    """The copies whose rendered blocks differ from what ``raw`` renders to; rewritten when
+    ``write``."""
+    blocks, stale = excerpts(raw), []
+    for rel in COPIES:
+        path = root / rel
+        text = path.read_text(encoding="utf-8")
+        new = render_copy(text, blocks, rel)
+        if new != text:
+            stale.append(rel)
+            if write:
+                path.write_text(new, encoding="utf-8")
+    return stale
+
+
 def render(raw: dict, plot_name: str | None) -> str:
     """The page's Markdown for the raw results ``raw`` (see ``load``)."""
     order = machine_order(raw)
@@ -1158,7 +1298,6 @@ def render(raw: dict, plot_name: str | None) -> str:
     lines += splines_section(raw, order)
     lines += pose_graphs_section(raw, order)
     lines += spline_fit_section(raw, order)
-    lines += change_section(raw, order)
     lines += accuracy_section(raw, order)
     while lines and lines[-1] == "":
         lines.pop()
@@ -1191,6 +1330,9 @@ def write_page(raw_dir: Path = C.RAW_DIR, page: Path = C.PAGE, plot: bool = True
                 _plot.plot_pose_graphs(graphs[0], page.parent / POSE_GRAPH_PLOT, machine)
     page.write_text(render(raw, PLOT_NAME), encoding="utf-8")
     print(f"wrote {page}")
+    if raw_dir == C.RAW_DIR and page == C.PAGE:
+        for rel in stale_copies(raw, write=True):
+            print(f"wrote {rel}")
 
 
 def main(argv=None) -> int:
@@ -1225,12 +1367,17 @@ def main(argv=None) -> int:
         _plot.plot(runs, args.plot)
         return 0
     if args.check:
-        text = render(C.load(args.raw_dir), PLOT_NAME)
+        raw = C.load(args.raw_dir)
         current = args.page.read_text(encoding="utf-8") if args.page.exists() else ""
-        if text != current:
-            print(f"{args.page} is out of date: run python -m benchmarks.report", file=sys.stderr)
+        stale = ([str(args.page)] if render(raw, PLOT_NAME) != current else []) + (
+            stale_copies(raw) if args.raw_dir == C.RAW_DIR else []
+        )
+        if stale:
+            print(
+                f"out of date: {', '.join(stale)}: run python -m benchmarks.report", file=sys.stderr
+            )
             return 1
-        print(f"{args.page} is up to date")
+        print(f"{args.page} and the rendered blocks of {', '.join(COPIES)} are up to date")
         return 0
     write_page(args.raw_dir, args.page, plot=not args.no_plot)
     return 0
