@@ -37,7 +37,7 @@ from pathlib import Path
 
 from benchmarks import common as C
 from benchmarks.common import GROUPS, OPS, fmt_ns, geomean, label, pretty_n, table
-from jaxlie_geo._mpref import fmt_ulp
+from benchmarks.mpref import fmt_ulp
 
 PLOT_NAME = "results.png"
 POSE_GRAPH_PLOT = "pose_graphs.png"

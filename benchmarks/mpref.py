@@ -3,7 +3,7 @@
 Used by tests/test_accuracy.py (assertions on jaxlie_geo) and benchmarks/accuracy.py
 (the same measurement, jaxlie_geo next to jaxlie 1.5). Everything a number in the
 accuracy table depends on lives here, so the test and the table cannot drift apart.
-It needs mpmath (the ``test`` and ``benchmarks`` extras); the library never imports it.
+It needs mpmath (the ``test`` and ``bench`` extras); the library never imports it.
 
 Inputs. For every group, dtype, angle regime and translation size we draw ``n_per``
 tangents with a fixed seed: a random unit direction (SO3/SE3) or a random sign
