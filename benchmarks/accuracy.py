@@ -1,7 +1,7 @@
 """Accuracy benchmark: worst error in ulp of exp, log and the derivatives of log∘exp,
 jaxlie_geo next to jaxlie 1.5, against mpmath references.
 
-The measurement is the one tests/test_accuracy.py asserts (shared code: jaxlie_geo/_mpref.py):
+The measurement is the one tests/test_accuracy.py asserts (shared code: benchmarks/mpref.py):
 per output block, ulp_err = ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)), the reference computed
 in mpmath at 60 digits from the float each function actually received (subnormals flushed,
 as XLA on CPU does). log's input is a stored group element (the exact exp of the stored
@@ -14,7 +14,7 @@ group × dtype × angle regime × translation norm {0, 1e-6, 1, 1e3} (groups wit
 with jax_enable_x64 off, float64 with it on. jaxlie has no Sim3 or SE23: their cells
 show jaxlie_geo only.
 
-Sim3 also gets its joint (θ, σ) regimes (jaxlie_geo/_mpref.py, ``_angles_sigmas``) and a
+Sim3 also gets its joint (θ, σ) regimes (benchmarks/mpref.py, ``_angles_sigmas``) and a
 comparison of its exp translation t = W v with the textbook closed form of W evaluated as
 it stands (``textbook_sim3_coefficients``), on the same inputs and the same measure.
 
@@ -43,8 +43,8 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 from benchmarks import common  # noqa: E402
+from benchmarks import mpref as M  # noqa: E402
 from benchmarks.report import save  # noqa: E402
-from jaxlie_geo import _mpref as M  # noqa: E402
 
 OP_TEXT = {"exp": "exp", "log": "log", "jac": "d/dx", "hess": "d²/dx²"}
 REGIME_HEAD = {

@@ -227,15 +227,12 @@ class MatrixLieGroup(abc.ABC):
             atol: tolerance on | ‖rotation part‖ − 1 |, ≥ 0: a scalar, or an array that
                 broadcasts against the batch axes. Default √ε of the parameters' dtype:
                 float32 3.5e-4, float64 1.5e-8, float16 3.1e-2, bfloat16 8.8e-2. Each
-                composition moves the norm by about an ulp, as a random walk (measured
-                on 64 chains of 10⁴ Haar-random SO3 and SO2 elements composed without
-                ``normalize``, float32 and float64: at most 8.5 ε after 10², 26 ε after
-                10³, 96 ε after 10⁴), so √ε (2900 ε in float32) accepts the chains a
-                program runs, while parameters that were never normalized or were
-                mis-scaled are off by far more. jaxlie's ``utils.get_epsilon`` (1e-5,
-                1e-10) would be stricter: 84 ε in float32, which 10⁴ compositions reach.
-                A float32 element cast to float64 can be off by about 1e-7, not valid at
-                float64's default: ``normalize()`` it after the cast.
+                composition moves the norm by about an ulp, as a random walk, so √ε
+                accepts the chains of compositions a program runs without ``normalize``,
+                while unnormalized or mis-scaled parameters are off by far more
+                (docs/design/validity-tolerance.md). A float32 element cast to float64
+                can be off by about 1e-7, not valid at float64's default: ``normalize()``
+                it after the cast.
 
         Returns:
             Boolean array of shape ``broadcast(batch, atol.shape)``: the batch shape for a
@@ -389,8 +386,8 @@ class MatrixLieGroup(abc.ABC):
         """The inputs computed once into memory (``_xla.materialize``) where the group sets
         ``_kernels_reread``, else as they are; one value for one input, else a tuple.
         Without the barrier XLA:CPU fuses a producer into every read of it: an exp's sincos
-        is recomputed per read, and a chain of K compositions grows as 4^K (SO3, K = 4: no
-        compiled program after minutes)."""
+        is recomputed per read, and a chain of K compositions grows as 4^K
+        (docs/design/memory-and-chunks.md)."""
         if self._kernels_reread:
             return materialize(*xs)
         return xs[0] if len(xs) == 1 else xs
@@ -675,9 +672,8 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
     def _between(self, other: Self) -> Self:
         """``self⁻¹ @ other`` as (R_a⁻¹ R_b, R_a⁻¹(t_b − t_a)): the difference of nearby
         translations is exact (Sterbenz), where ``inverse().multiply`` adds −R_a⁻¹t_a to
-        R_a⁻¹t_b and cancels ε·|t_a| (float32 poses 2·10⁴ from the origin, 0.5 apart:
-        the residual was off by 1e-3, 10⁴ ulp against mpmath; now ≤ 1.5 ulp). One rotation
-        of a point instead of two."""
+        R_a⁻¹t_b and cancels ε·|t_a| (docs/design/relative-poses.md). One rotation of a
+        point instead of two."""
         a, b = self._in_memory(*aligned(self, other))
         R_inv = a.rotation().inverse()
         return type(self).from_rotation_and_translation(

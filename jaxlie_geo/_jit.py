@@ -1,8 +1,8 @@
 """``jax.jit`` around every public method and function, with the trace-time element checks.
 
-An eager call then costs one dispatch (an eager ``SE3.exp`` about 5 µs) instead of one per
-primitive; inside a user's ``jit`` the wrapper is inlined. A leaf module: it imports only the
-checks.
+An eager call then costs one dispatch instead of one per primitive (the benchmark results
+page times an eager ``SE3.exp``); inside a user's ``jit`` the wrapper is inlined. A leaf
+module: it imports only the checks.
 """
 
 from __future__ import annotations

@@ -88,9 +88,9 @@ class Solution:
     Attributes:
         costs: ``(iterations + 1,)``, the cost before the first and after every accepted
             step.
-        times: ``(iterations + 1,)``, seconds since the call began at which each cost was
-            reached (the first includes building the problem and, for a new problem size,
-            compiling).
+        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
+            of the call to its evaluation (the first includes building the problem and, for
+            a new problem size, compiling).
         iterations: accepted steps.
         time: wall-clock seconds of the whole call.
         stop_reason: why it stopped, in words.
@@ -305,7 +305,7 @@ def minimise(
 
     Returns:
         The final x and the ``Solution`` record; ``start`` (``time.perf_counter()``) is when
-        the record's times begin, default now.
+        the record's times begin, by default the start of this call.
     """
     start = time.perf_counter() if start is None else start
     bar = Progress(progress, max_iterations)

@@ -219,9 +219,9 @@ _INT = {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}
 def pow2_inverse(v: jax.Array) -> jax.Array:
     """2^k with |v| · 2^k in [1, 2), elementwise: the power of two nearest 1/|v|, for exact
     rescaling. k is clipped so that 2^k is a normal float (for v = 0 any factor would do).
-    Built from the exponent bits: exact, and cheaper than ``frexp``/``ldexp`` (whose
-    ``ldexp`` XLA:CPU was measured to miscompute in some fused, vectorised programs with
-    jax 0.10.2: 1e-2 relative error at batch sizes of 32 and more)."""
+    Built from the exponent bits: exact, and cheaper than ``frexp``/``ldexp`` (XLA:CPU's
+    ``ldexp`` miscomputes in some fused, vectorised programs with jax 0.10.2: 1e-2
+    relative error at batch sizes of 32 and more)."""
     fi = jnp.finfo(v.dtype)
     int_t = _INT[v.dtype.itemsize]
     bias = fi.maxexp - 1
@@ -779,7 +779,7 @@ def sim3_family(
     of arrays of σ's and x's (common) shape and dtype; D0, B, C are (0, 0), (0, 1), (0, 2),
     and m = −1 stands for the moment I_p(σ) = ∫₀¹ τ^p e^{στ} dτ (A = I₀).
     (A tuple, not a stacked array: XLA:CPU vectorises a fused loop with separate outputs,
-    and measured 4x slower writing them interleaved.)
+    not one that writes them interleaved; docs/design/sim3-coefficients.md.)
 
     The section comment has the three expressions and their regions. Derivatives (custom
     JVP) are members of the family: ∂/∂σ raises p, ∂/∂x = −(T_{p+1,m+1} − m T_{p,m+2})/2,

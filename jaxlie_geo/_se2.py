@@ -84,7 +84,7 @@ class SE2(SEBase[SO2]):
         R = R(θ), t = V v with V = [[A, −B], [B, A]], A = sin θ/θ = F0,
         B = (1 − cos θ)/θ = θ F1 (Eberly 2024, §8.1, eq. 21; Zhang 2022, §5.1–5.2, derives
         the same arc). All come from one half-angle sincos: with c = cos(θ/2),
-        k = sinc(θ/2) and s = θk/2 = sin(θ/2), A = c k, B = s k, sin θ = 2 s c and
+        k = sinc(θ/2) and s = θk/2 = sin(θ/2), A = c k, B = s k, sin θ = 2 c s and
         cos θ = (c − s)(c + s) (absolute error ~eps at every angle).
 
         Args:

@@ -32,56 +32,45 @@ from ._xla import (
     matmul_unrolled,
 )
 
-_FORMS = ("axis_split", "textbook")
-
-
-def _check_form(form: str) -> None:
-    if form not in _FORMS:
-        raise ValueError(f"SE(3) translation kernel: form must be one of {_FORMS}, got {form!r}.")
-
 
 def exp_translation(
-    v: jax.Array,
-    w: jax.Array,
-    form: str = "axis_split",
-    half: Optional[Tuple[jax.Array, jax.Array]] = None,
+    v: jax.Array, w: jax.Array, half: Optional[Tuple[jax.Array, jax.Array]] = None
 ) -> jax.Array:
-    """Translation t = V(ω) v of ``SE3.exp((v, ω))``, θ = ‖ω‖, in one of two equal forms.
+    """Translation t = V(ω) v of ``SE3.exp((v, ω))``, θ = ‖ω‖, with v split along and
+    across the rotation axis: t = F0 v + F1 (ω × v) + F2 (ω·v) ω.
+
+    This is Zhang 2022, §8.4, t = θ⁻¹(R − I)(v × a) + (vᵀa) a for a *unit* axis a,
+    rewritten for the tangent's ω = θa with ω × (v × ω) = θ² v⊥: no 0/0 is left, and
+    nothing cancels at large angles (F0 = sin θ/θ is computed directly). The equal
+    textbook form v + F1 (ω × v) + F2 ω × (ω × v) (Eberly 2024, eq. 36; Barfoot 2017,
+    eq. 7.82) cancels v against θ²F2·v beyond π (docs/design/se3-kernel-forms.md).
 
     Args:
         v: ``(*batch, 3)``, the tangent's translation part.
         w: ``(*batch, 3)``, the tangent's rotation vector ω.
-        form: which algebraically equal expression to evaluate:
-
-            * ``"textbook"``: v + F1 (ω × v) + F2 ω × (ω × v) (Eberly 2024, eq. 36;
-              Barfoot 2017, eq. 7.82). Beyond π, v and θ²F2·v ≈ v cancel to the much
-              shorter t (14 ulp at θ ≈ 29).
-            * ``"axis_split"`` (default): v split along and across the rotation axis,
-              F0 v + F1 (ω × v) + F2 (ω·v) ω. This is Zhang 2022, §8.4,
-              t = θ⁻¹(R − I)(v × a) + (vᵀa) a for a *unit* axis a, rewritten for the
-              tangent's ω = θa with ω × (v × ω) = θ² v⊥: no 0/0 is left, and nothing
-              cancels at large angles (F0 = sin θ/θ is computed directly).
         half: ``(cos(θ/2), sin(θ/2)/(θ/2))``, each of shape ``batch``, from
             ``exp_half_angle``; passing it shares one sincos with the rotation.
 
     Returns:
         ``(*batch, 3)``: t, with F0 = c·k, F1 = k²/2 and F2 all read from ``half``.
     """
-    _check_form(form)
     c, k = exp_half_angle(w) if half is None else half
     x = sq_norm(w)
     f0 = c * k
-    wxv = cross(w, v)
     f1, f2 = (0.5 * k * k)[..., None], _scalar.F2(x, f0)[..., None]
-    if form == "axis_split":
-        return f0[..., None] * v + f1 * wxv + f2 * dot(w, v)[..., None] * w
-    return v + f1 * wxv + f2 * cross(w, wxv)
+    return f0[..., None] * v + f1 * cross(w, v) + f2 * dot(w, v)[..., None] * w
 
 
-def log_translation(
-    t: jax.Array, u: jax.Array, s: jax.Array, h: jax.Array, form: str = "axis_split"
-) -> jax.Array:
-    """Translation part v = V(ω)⁻¹ t of the principal ``SE3.log`` (θ ≤ π).
+def log_translation(t: jax.Array, u: jax.Array, s: jax.Array, h: jax.Array) -> jax.Array:
+    """Translation part v = V(ω)⁻¹ t of the principal ``SE3.log`` (θ ≤ π), with t split
+    along and across the axis: (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (Zhang 2022, §9,
+    rewritten for ω = θ·axis).
+
+    It is evaluated as h t − ½ s (u × t) + G s² (u·t) u (= h t⊥ + t∥ − ½ ω × t): two
+    non-negative multiples of t∥, no cancellation; u is stored, so ω's rounding is not
+    multiplied by |t|. The equal textbook form t − ½ ω × t + G ω × (ω × t) (Barfoot 2017,
+    eq. 7.85) cancels t⊥ in its last term near π, where h → 0
+    (docs/design/se3-kernel-forms.md).
 
     Args:
         t: ``(*batch, 3)``, the translation.
@@ -89,41 +78,17 @@ def log_translation(
             (from ``log_quaternion_parts``).
         s: shape ``batch``, θ/‖u‖, so that ω = s·u.
         h: shape ``batch``, (θ/2)cot(θ/2).
-        form: which algebraically equal expression to evaluate:
-
-            * ``"textbook"``: t − ½ ω × t + G ω × (ω × t) (Barfoot 2017, eq. 7.85; G from
-              ``_scalar``). The last term cancels t⊥ near π, where h → 0 (5 ulp at
-              π − 1e-3, |t| = 1e3).
-            * ``"axis_split"`` (default): t split along and across the axis,
-              (θ/2)cot(θ/2) t⊥ + ½ t × ω + (tᵀω)ω/θ² (Zhang 2022, §9, rewritten for
-              ω = θ·axis), evaluated as h t − ½ s (u × t) + G s² (u·t) u
-              (= h t⊥ + t∥ − ½ ω × t): two non-negative multiples of t∥, no cancellation;
-              u is stored, so ω's rounding is not multiplied by |t|.
 
     Returns:
         ``(*batch, 3)``: v.
     """
-    _check_form(form)
-    w = s[..., None] * u
-    x = sq_norm(w)
-    g = _scalar.G_principal(x)
-    if form == "axis_split":
-        # G s² = (1 − h)/‖u‖² exactly; where h < ½ (θ > 2.3) that form has no cancellation
-        # and does not carry s's rounding twice (5 → 3 ulp in v near π, |t| = 1e3).
-        far = h < 0.5
-        n2 = jnp.where(far, sq_norm(u), 1.0)
-        coef = jnp.where(far, (1.0 - h) / n2, g * s * s)
-        return (
-            h[..., None] * t
-            - (0.5 * s)[..., None] * cross(u, t)
-            + (coef * dot(u, t))[..., None] * u
-        )
-    wxt = cross(w, t)
-    return t - 0.5 * wxt + g[..., None] * cross(w, wxt)
-
-
-# The more accurate form (see exp_translation); speed: docs/design/se3-kernel-forms.md.
-_KERNEL_FORM = "axis_split"
+    g = _scalar.G_principal(sq_norm(s[..., None] * u))
+    # G s² = (1 − h)/‖u‖² exactly; where h < ½ (θ > 2.3) that form has no cancellation
+    # and does not carry s's rounding twice.
+    far = h < 0.5
+    n2 = jnp.where(far, sq_norm(u), 1.0)
+    coef = jnp.where(far, (1.0 - h) / n2, g * s * s)
+    return h[..., None] * t - (0.5 * s)[..., None] * cross(u, t) + (coef * dot(u, t))[..., None] * u
 
 
 def coupling_entries(
@@ -210,7 +175,7 @@ class SE3(SEBase[SO3]):
         xi = cls._check_tangent(tangent)
         v, w = xi[..., :3], xi[..., 3:]
         half = exp_half_angle(w)
-        t = exp_translation(v, w, _KERNEL_FORM, half)
+        t = exp_translation(v, w, half)
         return SE3(jnp.concatenate([exp_quaternion(w, half), t], axis=-1))
 
     @override
@@ -223,7 +188,7 @@ class SE3(SEBase[SO3]):
         cancellation near π; see ``log_translation``)."""
         p = self.wxyz_xyz
         u, s, h = log_quaternion_parts(p[..., :4])
-        v = log_translation(p[..., 4:], u, s, h, _KERNEL_FORM)
+        v = log_translation(p[..., 4:], u, s, h)
         return jnp.concatenate([v, s[..., None] * u], axis=-1)
 
     @classmethod

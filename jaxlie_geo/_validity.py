@@ -25,8 +25,8 @@ def check_valid(x: MatrixLieGroup, atol: Optional[hints.Scalar] = None) -> None:
 
     Under ``jit``, ``vmap`` or ``grad``, wrap the outermost function in
     ``jax.experimental.checkify.checkify``, which returns ``(error, out)``;
-    ``error.throw()`` raises ``JaxRuntimeError`` when an element was invalid, and
-    ``error.get()`` gives the message (``None`` when all were valid). Without
+    ``error.throw()`` raises ``JaxRuntimeError`` when an element is invalid, and
+    ``error.get()`` gives the message (``None`` when all are valid). Without
     ``checkify``, an eager call raises at once for an invalid element, and ``jit`` refuses
     to trace the check (checkify's rule for every ``checkify.check``).
 

@@ -103,8 +103,7 @@ def materialize_columns(*xs: jax.Array) -> List[jax.Array]:
     F2, ...): XLA:CPU fuses them into the loop that writes the stacked matrix, which
     evaluates every entry on its own and so recomputes each coefficient once per entry
     that reads it. Behind ``materialize`` as separate arrays they stay fused; stacked
-    into one array they are computed once (SE(3)'s J_r: 431 → 172 ns per element in
-    float32, ``docs/design/memory-and-chunks.md``)."""
+    into one array they are computed once (``docs/design/memory-and-chunks.md``)."""
     stacked = materialize(jnp.stack(xs, axis=-1))
     return list(jnp.unstack(stacked, axis=-1))
 

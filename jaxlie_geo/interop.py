@@ -79,8 +79,8 @@ def install_as_jaxlie() -> None:
     ``ModuleNotFoundError``.
 
     Raises:
-        RuntimeError: jaxlie (or a module of it) was imported before the call: the objects
-            already made from it would not be jaxlie_geo's, so the call refuses rather than
+        RuntimeError: jaxlie (or a module of it) is imported already: the objects
+            made from it would not be jaxlie_geo's, so the call refuses rather than
             mix the two libraries.
     """
     ours = sys.modules[__package__]

@@ -111,10 +111,11 @@ class SplineTime(NamedTuple):
     """A time on a spline as a segment index and the fraction of the segment:
     ``t = t0 + (segment + fraction)·dt``.
 
-    The exact form of a time: a float32 time near t0 + 10⁵ s is only known to 8 ms, while
-    the fraction of a 10 ms segment is kept to 10⁻⁷. ``Spline.locate`` computes it (on the
-    host in float64 or exact integer arithmetic for concrete times); under ``jit`` pass it
-    directly where a time stamp would lose digits in the working dtype."""
+    The exact form of a time: a float32 time near t0 + 10⁵ is only known to 2⁻⁷ ≈ 0.008,
+    while the fraction of a segment of length 0.01 is kept to 10⁻⁷. ``Spline.locate``
+    computes it (on the host in float64 or exact integer arithmetic for concrete times);
+    under ``jit`` pass it directly where a time stamp would lose digits in the working
+    dtype."""
 
     segment: jax.Array
     """Integer array, ``0 ≤ segment < num_segments``."""
@@ -581,9 +582,8 @@ def fit(
     composed with J_r⁻¹ of the residual) and steps T_m → T_m exp(δ_m); the loop, damping
     and stopping rules are those of ``pose_graph.solve``. Each sample's residual depends on
     ``degree + 1`` consecutive control points, so the normal equations are block-banded:
-    time and memory grow linearly with the number of control points (10⁴ control points of
-    a cubic SE(3) spline from 10⁵ samples: a few seconds on two CPU cores, with QDLDL or
-    the banded Cholesky).
+    time and memory grow linearly with the number of control points (docs/splines.md times
+    a fit of 10⁴ control points).
 
     Args:
         times: concrete ``(N,)`` time stamps (float or integer, on the host).

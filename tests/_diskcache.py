@@ -1,8 +1,9 @@
 """Reference values computed once per machine: a disk cache for the slow mpmath references.
 
 ``@disk_cached`` stores a function's result in ``out/test-cache`` (``make clean`` removes it),
-under a key made of the source of the function's module and of ``_mpref.py``, the function's
-name and the ``repr`` of its arguments, so any edit to the references computes them again.
+under a key made of the source of the function's module and of ``benchmarks/mpref.py``, the
+function's name and the ``repr`` of its arguments, so any edit to the references computes them
+again.
 The pytest-xdist workers share it: the first to need a result computes it while holding a
 lock on its file, the others wait for it and read it.
 """
@@ -19,7 +20,7 @@ from pathlib import Path
 from typing import Any, Callable, TypeVar
 
 _DIR = Path(__file__).resolve().parents[1] / "out" / "test-cache"
-_SHARED = Path(__file__).parents[1] / "jaxlie_geo" / "_mpref.py"
+_SHARED = Path(__file__).parents[1] / "benchmarks" / "mpref.py"
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -10,7 +10,7 @@ with 1e-8 ≤ |σ| ≤ 20; σ = 0 or 1e-30 ≤ |σ| ≤ 1e-4 at 0.1 ≤ θ ≤ 3
 for r ∈ {1e-3, 1e-5, 1e-8} and θ/|σ| = ρ from 1e-3 to 1e3 with both signs of σ; and
 3 ≤ |σ| ≤ 20 at 1e-8 ≤ θ ≤ π − 1e-3 (``M._angles_sigmas``).
 
-Measure (jaxlie_geo/_mpref.py has the details and the references): per output block,
+Measure (benchmarks/mpref.py has the details and the references): per output block,
 ulp_err = ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)), the reference computed in mpmath at 60
 digits from the float the function actually received (subnormals flushed, as XLA on CPU
 does); log's input is a stored group element (the exact exp rounded to the dtype) and its
@@ -37,7 +37,7 @@ from _diskcache import disk_cached
 from conftest import SE_GROUPS
 
 import jaxlie_geo
-from jaxlie_geo import _mpref as M
+from benchmarks import mpref as M
 
 N_PER = 64
 
@@ -240,7 +240,7 @@ def test_se3_exp_near_full_turns_with_v_perpendicular(dtype):
     """θ within 1e-3 of 2πk (k = 1..4) with v ⟂ ω, ‖v‖ ∈ {1, 10³}: there the translation
     F0 v + F1 ω×v + F2 (ω·v) ω is ~1e-4 ‖v‖ long and ω·v cancels. Its error stays within
     the conditioning bound of exp beyond π, 4 + |θ|/2 ulp of max(1, ‖v‖_∞) (one ulp of ω
-    moves t by about ε‖v‖ here; ``_mpref.Cases.exp_floor``). The grid's beyond-π draws
+    moves t by about ε‖v‖ here; ``benchmarks.mpref.Cases.exp_floor``). The grid's beyond-π draws
     near 2πk have v in a random direction, where ω·v does not cancel."""
     import jax.numpy as jnp
     from mpmath import mp

@@ -365,8 +365,8 @@ def test_integer_inputs_take_the_elements_dtype():
     """Integer covariances, velocities and tangent increments combined with a float32 element
     give float32 under x64, as integer points and translations do (they were promoted to the
     default float, float64). Without x64 the default float is float32: nothing to tell."""
+    from benchmarks.mpref import x64_for
     from jaxlie_geo import jacobians, motion, uncertainty
-    from jaxlie_geo._mpref import x64_for
 
     with x64_for("float64"):
         T = SE3.exp(jnp.zeros(6, jnp.float32))

@@ -34,7 +34,7 @@ from conftest import (
 from flax import serialization  # the test extra installs it
 
 import jaxlie_geo
-from jaxlie_geo._mpref import x64_for
+from benchmarks.mpref import x64_for
 
 REF = {
     jaxlie_geo.SO2: jaxlie_ref.SO2,

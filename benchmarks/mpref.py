@@ -3,7 +3,7 @@
 Used by tests/test_accuracy.py (assertions on jaxlie_geo) and benchmarks/accuracy.py
 (the same measurement, jaxlie_geo next to jaxlie 1.5). Everything a number in the
 accuracy table depends on lives here, so the test and the table cannot drift apart.
-It needs mpmath (the ``test`` and ``benchmarks`` extras); the library never imports it.
+It needs mpmath (the ``test`` and ``bench`` extras); the library never imports it.
 
 Inputs. For every group, dtype, angle regime and translation size we draw ``n_per``
 tangents with a fixed seed: a random unit direction (SO3/SE3) or a random sign
@@ -83,6 +83,7 @@ import mpmath as mp  # type: ignore[import-untyped]
 import numpy as np
 
 from jaxlie_geo._xla import x64
+from benchmarks.common import fmt_ulp as fmt_ulp
 
 DPS = 60
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
@@ -981,16 +982,3 @@ def describe_case(cases: Cases, k: int, op: str) -> str:
     what = "params" if op == "log" else "tangent"
     sg = f" σ={cases.sigma[k]:.6g}" if cases.group == "Sim3" else ""
     return f"angle≈{cases.angle[k]:.6g}{sg} |v|={cases.size[k]:g} {what}=[{vals}]"
-
-
-def fmt_ulp(e: Optional[float]) -> str:
-    """An error in ulp as the accuracy tables print it: "–" for none, 3 significant digits."""
-    if e is None or (isinstance(e, float) and math.isnan(e)):
-        return "–"
-    if not math.isfinite(e):
-        return "non-finite"
-    if e < 10:
-        return f"{e:.2f}"
-    if e < 1000:
-        return f"{e:.0f}"
-    return f"{e:.1e}"
