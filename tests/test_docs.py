@@ -8,6 +8,7 @@ a broken link, a page missing from the nav, or a docstring griffe cannot parse f
 
 from __future__ import annotations
 
+import html
 import importlib.util
 import json
 import os
@@ -18,6 +19,7 @@ import types
 from pathlib import Path
 
 import pytest
+from mkdocs.exceptions import PluginError
 
 import jaxlie_geo
 
@@ -69,16 +71,50 @@ def test_site_loads_nothing_from_the_network(site: Path) -> None:
     assert not imported, sorted(imported)
 
 
+# TeX a reader would see as such: a command, a delimiter, a braced sub- or superscript.
+_TEX = re.compile(r"\\[A-Za-z]+|\\[()\[\]|]|\^\{|_\{|\$")
+_MATH_ELEMENT = re.compile(r"<math\b.*?</math>", re.S)
+
+
+def _prose(text: str) -> str:
+    """The text of a page outside its maths and code, as a reader sees it: without the
+    ``<math>`` elements, scripts, styles, code blocks and the hidden copy of each notebook
+    cell's source that the copy button reads."""
+    text = _MATH_ELEMENT.sub("", text)
+    text = re.sub(r'<div class="clipboard-copy-txt"[^>]*>.*?</div>', "", text, flags=re.S)
+    text = re.sub(r"<(script|style|code|pre)\b.*?</\1>", "", text, flags=re.S | re.I)
+    return html.unescape(re.sub(r"<[^>]*>", " ", text))
+
+
 def test_maths_is_mathml_with_no_tex_left(site: Path) -> None:
-    """Every formula is MathML; no TeX delimiter survives outside a ``<math>`` element (the
-    text a reader without a script would see)."""
+    """Every formula is MathML, and no TeX survives on any page (notebooks, design notes,
+    API reference, nav and titles included): no command, delimiter, ``^{``, ``_{`` or ``$``
+    in the text outside ``<math>`` and code, and no command left as text inside a
+    ``<math>`` element."""
     pages = _pages(site)
     assert any("<math " in text for text in pages.values())
+    assert {site / "api" / "sim3.html", site / "notebooks" / "02_numerics.html"} <= set(pages)
+    found = {}
     for page, text in pages.items():
-        outside = re.sub(r"<math\b.*?</math>", "", text, flags=re.S)
-        outside = re.sub(r"<(script|code|pre)\b.*?</\1>", "", outside, flags=re.S | re.I)
-        for delimiter in ("\\(", "\\)", "\\[", "\\]", "$$"):
-            assert delimiter not in outside, (page.relative_to(site).as_posix(), delimiter)
+        name = page.relative_to(site).as_posix()
+        prose = _prose(text)
+        for match in _TEX.finditer(prose):
+            found.setdefault(name, prose[max(match.start() - 40, 0) : match.end() + 40].strip())
+        for math in _MATH_ELEMENT.findall(text):
+            if re.search(r">[^<]*\\", math):
+                found.setdefault(name, math)
+    assert not found, found
+
+
+def test_a_tex_command_mathml_cannot_show_fails_the_build() -> None:
+    """The hooks render what latex2mathml can show and raise, naming the page, on a
+    command it would leave as text or an operator name it cannot read."""
+    hooks = _hooks()
+    assert "<msub>" in hooks.to_mathml(r"T_{p,m}", "inline", "page.md")
+    assert "<mo>argmin</mo>" in hooks.to_mathml(r"\operatorname{argmin}_T", "inline", "page.md")
+    for tex in (r"\arg\min_T f", r"\big\| x \big\|", r"\operatorname{atan2}(y, x)", r"\unknown x"):
+        with pytest.raises(PluginError, match="page.md"):
+            hooks.to_mathml(tex, "inline", "page.md")
 
 
 def test_links_resolve_to_files(site: Path) -> None:
