@@ -17,8 +17,10 @@ import subprocess
 import sys
 import types
 from pathlib import Path
+from urllib.parse import unquote
 
 import pytest
+import yaml
 from mkdocs.exceptions import PluginError
 
 import jaxlie_geo
@@ -132,6 +134,78 @@ def test_links_resolve_to_files(site: Path) -> None:
             if not path.is_file():
                 missing.add((page.relative_to(site).as_posix(), target))
     assert not missing, sorted(missing)[:10]
+
+
+_ID = re.compile(r"\bid=\"([^\"]+)\"")
+_ANCHOR = re.compile(r"<a\b[^>]*?\bhref=\"([^\"]*#[^\"]*)\"", re.I)
+
+
+def test_anchors_lead_to_an_id(site: Path) -> None:
+    """Every link to a place in a page of the site (``#name`` in the same page,
+    ``page.html#name`` in another) names an id that page has: contents lists, permalinks,
+    cross-references and the API's autorefs all lead somewhere."""
+    pages = _pages(site)
+    ids = {page.resolve(): set(_ID.findall(text)) for page, text in pages.items()}
+    checked, missing = 0, set()
+    for page, text in pages.items():
+        if page.name == "404.html":
+            continue
+        for href in _ANCHOR.findall(text):
+            path, _, anchor = html.unescape(href).partition("#")
+            if not anchor or re.match(r"^[a-z][a-z0-9+.-]*:", path, re.I):
+                continue
+            target = (page.parent / path).resolve() if path else page.resolve()
+            checked += 1
+            if anchor not in ids.get(target, ()) and unquote(anchor) not in ids.get(target, ()):
+                missing.add((page.relative_to(site).as_posix(), href))
+    assert checked > 1000, checked
+    assert not missing, sorted(missing)[:20]
+
+
+def _nav_titles() -> dict[str, str]:
+    """The title mkdocs.yml's nav gives each page, by its path under docs/."""
+    config = yaml.safe_load((REPO / "mkdocs.yml").read_text(encoding="utf-8"))
+    titles: dict[str, str] = {}
+
+    def walk(items: list) -> None:
+        for item in items:
+            if isinstance(item, dict):
+                for title, value in item.items():
+                    walk(value) if isinstance(value, list) else titles.setdefault(value, title)
+
+    walk(config["nav"])
+    return titles
+
+
+def test_notebook_pages_keep_titles_and_headings(site: Path) -> None:
+    """A notebook page has the nav's title, and its contents list has every heading of the
+    notebook below the first (the theme lists the title heading's children), inline code
+    kept, linked to the heading's id on the page."""
+    titles = _nav_titles()
+    for notebook in sorted((REPO / "notebooks").glob("*.ipynb")):
+        text = (site / "notebooks" / f"{notebook.stem}.html").read_text(encoding="utf-8")
+        title = titles[f"notebooks/{notebook.name}"]
+        assert f"<title>{html.escape(title)} - jaxlie_geo</title>" in text, notebook.name
+        cells = json.loads(notebook.read_text(encoding="utf-8"))["cells"]
+        headings = [
+            line.lstrip("#").strip()
+            for cell in cells
+            if cell["cell_type"] == "markdown"
+            for line in "".join(cell["source"]).splitlines()
+            if re.match(r"#{2,6} ", line)
+        ]
+        link = r'<a href="#([^"]+)" class="md-nav__link">\s*<span class="md-ellipsis">'
+        contents = re.findall(link + r"\s*(.*?)\s*</span>", text, flags=re.S)
+        assert len({anchor for anchor, _ in contents}) == len(headings), notebook.name
+        shown = [
+            html.unescape(re.sub(r"<[^>]*>", " ", _MATH_ELEMENT.sub(" ", title))).split()
+            for _, title in contents
+        ]
+        for heading in headings:
+            words = re.sub(r"\$[^$]*\$", " ", heading).replace("`", " ").split()
+            assert any(all(w in s for w in words) for s in shown), (notebook.name, heading)
+            for code in re.findall(r"`([^`]+)`", heading):
+                assert any(f"<code>{html.escape(code)}</code>" in t for _, t in contents), code
 
 
 def test_group_pages_list_members_in_one_order(site: Path) -> None:
