@@ -159,7 +159,7 @@ SLOW: List[Tuple[str, str]] = [
     (
         r"test_docs\.py::test_(site_loads|maths_is|links_resolve|anchors_lead|group_pages|"
         r"site_builds|notebooks_are_pages|notebook_pages_keep|every_public|each_group_page|"
-        r"python_blocks).*",
+        r"python_blocks|search_works).*",
         "test_api_surface (the public names) and test_docs::test_readme_links_resolve",
     ),
     (

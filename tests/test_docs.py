@@ -208,6 +208,46 @@ def test_notebook_pages_keep_titles_and_headings(site: Path) -> None:
                 assert any(f"<code>{html.escape(code)}</code>" in t for _, t in contents), code
 
 
+_CONFIG = re.compile(r'<script id="__config" type="application/json">(.*?)</script>', re.S)
+_SCRIPT = re.compile(r'<script src="([^"]+)"')
+
+
+def test_search_works_from_disk(site: Path) -> None:
+    """Search works with the site opened from disk (``file://``), with nothing to download:
+    every page has the search form; the theme's script reads the index from
+    ``search/search_index.js`` (a script, which a file page may load, unlike JSON); the
+    search worker it names is a file of the site, and the iframe-worker shim, a local
+    script loaded before the theme's, starts it where a browser will not start a Worker
+    from a file page. The index covers the pages in every part of the site, in English
+    (no language script for the worker to import)."""
+    for page in (site / "index.html", site / "api" / "so3.html", site / "design" / "index.html"):
+        text = page.read_text(encoding="utf-8")
+        assert '<form class="md-search__form" name="search">' in text, page
+        match = _CONFIG.search(text)
+        assert match, page
+        config = json.loads(match.group(1))
+        assert (page.parent / config["base"] / "search" / "search_index.js").is_file(), page
+        assert (page.parent / config["search"]).is_file(), config["search"]
+        scripts = _SCRIPT.findall(text)
+        shim = [s for s in scripts if "iframe-worker" in s]
+        bundle = [s for s in scripts if "/bundle." in s or s.startswith("bundle.")]
+        assert len(shim) == 1 and len(bundle) == 1, scripts
+        assert scripts.index(shim[0]) < scripts.index(bundle[0]), scripts
+        assert not re.match(r"^([a-z][a-z0-9+.-]*:)?//", shim[0], re.I), shim
+        code = (page.parent / shim[0]).read_text(encoding="utf-8")
+        assert 'location.protocol==="file:"&&(window.Worker=' in code, shim
+    prefix = "var __index = "
+    script = (site / "search" / "search_index.js").read_text(encoding="utf-8")
+    assert script.startswith(prefix)
+    index = json.loads(script[len(prefix) :])
+    assert index == json.loads((site / "search" / "search_index.json").read_text(encoding="utf-8"))
+    assert index["config"]["lang"] == ["en"]
+    located = {doc["location"].split("#")[0] for doc in index["docs"]}
+    assert all((site / location).is_file() for location in located if location), located
+    parts = ("quickstart", "api/so3", "notebooks/02_numerics", "design/index", "benchmarks/RESULTS")
+    assert {f"{part}.html" for part in parts} <= located
+
+
 def test_group_pages_list_members_in_one_order(site: Path) -> None:
     """The members every group has appear in the same order on every group's API page."""
     groups = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
