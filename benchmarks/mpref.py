@@ -75,15 +75,15 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Sequence, Tuple, Union
 
 import jax
 import jax.numpy as jnp
 import mpmath as mp  # type: ignore[import-untyped]
 import numpy as np
 
-from jaxlie_geo._xla import x64
 from benchmarks.common import fmt_ulp as fmt_ulp
+from jaxlie_geo._xla import x64
 
 DPS = 60
 GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")

@@ -11,7 +11,8 @@ The notebooks in ``notebooks/`` are added the same way, as ``notebooks/<name>.ip
 ``mkdocs-jupyter`` (which executes and renders them) looks at the files. Their Markdown cells
 keep TeX between ``$ … $`` and ``$$ … $$``, and the notebook template loads MathJax from a
 CDN (and Mermaid, for diagrams); ``on_page_content`` removes those scripts and renders the
-formulas as MathML too.
+formulas as MathML too, and gives the page a table of contents read from its rendered
+headings.
 
 The benchmark scripts generate ``benchmarks/RESULTS.md``, with its plot
 ``benchmarks/results.png`` beside it. ``on_files`` adds every Markdown and PNG file under
@@ -37,6 +38,7 @@ from latex2mathml.converter import convert
 from mkdocs.exceptions import PluginError
 from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File, Files, InclusionLevel
+from mkdocs.structure.toc import TableOfContents, get_toc
 
 SOURCE = "benchmarks"
 NOTEBOOKS = "notebooks"
@@ -51,13 +53,28 @@ _LINK = re.compile(r"(!?)\[([^\]\n]*)\]\(([^)\s]+)(\s+\"[^\"]*\")?\)")
 _MATH = re.compile(r'<(span|div) class="arithmatex">\s*\\([(\[])(.*?)\\[)\]]\s*</\1>', re.DOTALL)
 
 
+# latex2mathml writes a command it does not know as text (<mi>\arg</mi>, <mo>\|</mo> after
+# \big) and an \operatorname it cannot read as an empty <mo />.
+_UNRENDERED = re.compile(r">[^<]*\\|<mo\s*/>")
+
+
+def to_mathml(tex: str, display: str, where: str) -> str:
+    """``tex`` as a MathML element (``display`` "inline" or "block"); a formula that
+    latex2mathml rejects, or one with a command it would leave as text, raises
+    ``PluginError`` naming ``where``."""
+    try:
+        math = convert(tex, display=display)
+    except Exception as error:  # latex2mathml raises its own exceptions for unknown TeX
+        raise PluginError(f"{where}: cannot render {tex!r} as MathML: {error}") from error
+    if _UNRENDERED.search(math):
+        raise PluginError(f"{where}: {tex!r} has a command MathML cannot show: {math}")
+    return math
+
+
 def _mathml(match: re.Match, where: str) -> str:
     tag, opening, tex = match.groups()
     display = "block" if opening == "[" else "inline"
-    try:
-        math = convert(html.unescape(tex).strip(), display=display)
-    except Exception as error:  # latex2mathml raises its own exceptions for unknown TeX
-        raise PluginError(f"{where}: cannot render {tex.strip()!r} as MathML: {error}") from error
+    math = to_mathml(html.unescape(tex).strip(), display, where)
     return f'<{tag} class="arithmatex">{math}</{tag}>'
 
 
@@ -78,11 +95,7 @@ _REMOTE_SCRIPTS = re.compile(
 def _notebook_mathml(match: re.Match, where: str) -> str:
     display, inline = match.groups()
     tex = html.unescape(display if display is not None else inline).strip()
-    mode = "block" if display is not None else "inline"
-    try:
-        return convert(tex, display=mode)
-    except Exception as error:
-        raise PluginError(f"{where}: cannot render {tex!r} as MathML: {error}") from error
+    return to_mathml(tex, "block" if display is not None else "inline", where)
 
 
 def _notebook_content(content: str, where: str) -> str:
@@ -125,10 +138,35 @@ def markdown_cells(content: str) -> list[tuple[int, int]]:
     return spans
 
 
+# A heading of a notebook page as nbconvert writes it: its id, its HTML, its permalink.
+_NOTEBOOK_HEADING = re.compile(
+    r'<h([1-6]) id="([^"]+)">(.*?)<a class="anchor-link" href="#\2">¶</a></h\1>', re.DOTALL
+)
+
+
+def notebook_toc(content: str) -> TableOfContents:
+    """The table of contents of a rendered notebook page, read from its headings: each
+    entry links to the heading's own id and shows its HTML (inline code and maths kept)."""
+    tokens: list = []
+    stack: list = []
+    for level, anchor, title in _NOTEBOOK_HEADING.findall(content):
+        token = {"level": int(level), "id": anchor, "name": title.strip(), "children": []}
+        while stack and stack[-1]["level"] >= token["level"]:
+            stack.pop()
+        (stack[-1]["children"] if stack else tokens).append(token)
+        stack.append(token)
+    return get_toc(tokens)
+
+
 def on_page_content(content: str, page, config, files: Files) -> str:
     if page.file.src_uri.endswith(".ipynb"):
         content = _notebook_content(content, page.file.src_uri)
-    return _MATH.sub(lambda m: _mathml(m, page.file.src_uri), content)
+    content = _MATH.sub(lambda m: _mathml(m, page.file.src_uri), content)
+    if page.file.src_uri.endswith(".ipynb"):
+        # mkdocs-jupyter's own contents read the Markdown without its inline code, so
+        # their titles lose it and their links name ids the page does not have.
+        page.toc = notebook_toc(content)
+    return content
 
 
 def _root(config) -> Path:

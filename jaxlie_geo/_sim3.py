@@ -1,6 +1,6 @@
 """Sim(3): similarity transforms x ↦ s R x + t, the group of monocular SLAM's scale drift.
 
-The exponential's translation integrates e^{τ(ω̂ + σI)} over τ ∈ [0, 1]; its coefficients
+The exponential's translation integrates exp(τ(ω̂ + σI)) over τ ∈ [0, 1]; its coefficients
 are joint functions of the rotation angle θ and the log-scale σ, evaluated by
 ``_scalar.sim3_coefficients`` without the cancellation of the textbook closed forms as
 θ and σ go to 0 together.
@@ -53,7 +53,7 @@ def _w_inverse_apply(
         W⁻¹ = (D0 I − B ω̂ + ((B² − C D0)/A) ωωᵀ) / |φ|²,   |φ|² = D0² + θ²B² > 0 (θ < 2π).
 
     (A, D0, B, C) are first scaled by the power of two nearest 1/A (``pow2_inverse``),
-    exactly (W⁻¹ is homogeneous of degree −1 in them): |φ|² stays near 1 (≈ e^{2σ}/σ²
+    exactly (W⁻¹ is homogeneous of degree −1 in them): |φ|² stays near 1 (≈ exp(2σ)/σ²
     otherwise, whose third negative power, in second derivatives, underflows float32 from
     σ ≈ 18). ω enters as
     k·u, the quaternion's vector part and the log's scale, without forming the rounded ω
@@ -187,7 +187,7 @@ class Sim3(MatrixLieGroup):
     @override
     def exp(cls, tangent: hints.Array) -> Sim3:
         """Exponential map of (v, ω, σ): q = exp_SO3(ω), log-scale σ (exactly), and
-        t = W v with W = ∫₀¹ e^{τ(ω̂ + σI)} dτ = D0 I + B ω̂ + C ωωᵀ, the coefficients
+        t = W v with W = ∫₀¹ exp(τ(ω̂ + σI)) dτ = D0 I + B ω̂ + C ωωᵀ, the coefficients
         from ``_scalar.sim3_coefficients`` (accurate jointly in θ and σ).
 
         Args:
@@ -266,8 +266,8 @@ class Sim3(MatrixLieGroup):
         """(R, (A, D0, B, C), [W | ∂t/∂ω | ∂t/∂σ]) at ξ = (v, ω, σ), the last ``(*batch, 3, 7)``.
 
         J_r = Σ (−ad ξ)ⁿ/(n+1)! is block triangular, [[W(−ξ), Q, c], [0, J_r(ω), 0],
-        [0, 0, 1]]. Its translation row is e^{−Y} ∂(W v)/∂(v, ω, σ) for Y = ω̂ + σI (the
-        first-order change of the translation of exp(ξ)⁻¹ exp(ξ + δ)), e^{−Y} = e^{−σ} Rᵀ.
+        [0, 0, 1]]. Its translation row is exp(−Y) ∂(W v)/∂(v, ω, σ) for Y = ω̂ + σI (the
+        first-order change of the translation of exp(ξ)⁻¹ exp(ξ + δ)), exp(−Y) = exp(−σ) Rᵀ.
         With x = θ², the derivatives of t = W v = D0 v + B ω×v + C (ω·v) ω are
 
             ∂t/∂σ = D0_σ v + B_σ ω×v + C_σ (ω·v) ω,
@@ -305,7 +305,7 @@ class Sim3(MatrixLieGroup):
     @override
     def jac_right(cls, tangent: hints.Array) -> jax.Array:
         """``(*batch, 7) -> (*batch, 7, 7)``: [[W(−ξ), Q, c], [0, J_r(ω), 0], [0, 0, 1]] with
-        [W(−ξ) | Q | c] = e^{−σ} Rᵀ [W | ∂t/∂ω | ∂t/∂σ] (``_jac_parts``), J_r(ω) in closed
+        [W(−ξ) | Q | c] = exp(−σ) Rᵀ [W | ∂t/∂ω | ∂t/∂σ] (``_jac_parts``), J_r(ω) in closed
         form."""
         xi = cls._check_tangent(tangent, "jac_right")
         R, _, M = cls._jac_parts(xi)
@@ -324,8 +324,8 @@ class Sim3(MatrixLieGroup):
     def jac_right_inv(cls, tangent: hints.Array) -> jax.Array:
         """``(*batch, 7) -> (*batch, 7, 7)``: the block inverse of ``jac_right``,
         [[W(−ξ)⁻¹, −W(−ξ)⁻¹ Q J⁻¹, −W(−ξ)⁻¹ c], [0, J⁻¹, 0], [0, 0, 1]]; with
-        W(−ξ)⁻¹ = e^σ W⁻¹ R (W(−Y) = e^{−Y} W(Y)) its top row is
-        [e^σ W⁻¹ R, −W⁻¹ (∂t/∂ω) J⁻¹, −W⁻¹ ∂t/∂σ], W⁻¹ and J_r(ω)⁻¹ in closed form
+        W(−ξ)⁻¹ = exp(σ) W⁻¹ R (W(−Y) = exp(−Y) W(Y)) its top row is
+        [exp(σ) W⁻¹ R, −W⁻¹ (∂t/∂ω) J⁻¹, −W⁻¹ ∂t/∂σ], W⁻¹ and J_r(ω)⁻¹ in closed form
         (``_w_inverse_apply``; no matrix inverse)."""
         xi = cls._check_tangent(tangent, "jac_right_inv")
         w = xi[..., 3:6]

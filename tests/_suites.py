@@ -157,8 +157,9 @@ SLOW: List[Tuple[str, str]] = [
         "test_pose_graph's solves on one device",
     ),
     (
-        r"test_docs\.py::test_(site_loads|maths_is|links_resolve|group_pages|site_builds|"
-        r"notebooks_are_pages|every_public|each_group_page|python_blocks).*",
+        r"test_docs\.py::test_(site_loads|maths_is|links_resolve|anchors_lead|group_pages|"
+        r"site_builds|notebooks_are_pages|notebook_pages_keep|every_public|each_group_page|"
+        r"python_blocks|search_works).*",
         "test_api_surface (the public names) and test_docs::test_readme_links_resolve",
     ),
     (

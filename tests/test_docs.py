@@ -8,6 +8,7 @@ a broken link, a page missing from the nav, or a docstring griffe cannot parse f
 
 from __future__ import annotations
 
+import html
 import importlib.util
 import json
 import os
@@ -16,8 +17,11 @@ import subprocess
 import sys
 import types
 from pathlib import Path
+from urllib.parse import unquote
 
 import pytest
+import yaml
+from mkdocs.exceptions import PluginError
 
 import jaxlie_geo
 
@@ -69,16 +73,50 @@ def test_site_loads_nothing_from_the_network(site: Path) -> None:
     assert not imported, sorted(imported)
 
 
+# TeX a reader would see as such: a command, a delimiter, a braced sub- or superscript.
+_TEX = re.compile(r"\\[A-Za-z]+|\\[()\[\]|]|\^\{|_\{|\$")
+_MATH_ELEMENT = re.compile(r"<math\b.*?</math>", re.S)
+
+
+def _prose(text: str) -> str:
+    """The text of a page outside its maths and code, as a reader sees it: without the
+    ``<math>`` elements, scripts, styles, code blocks and the hidden copy of each notebook
+    cell's source that the copy button reads."""
+    text = _MATH_ELEMENT.sub("", text)
+    text = re.sub(r'<div class="clipboard-copy-txt"[^>]*>.*?</div>', "", text, flags=re.S)
+    text = re.sub(r"<(script|style|code|pre)\b.*?</\1>", "", text, flags=re.S | re.I)
+    return html.unescape(re.sub(r"<[^>]*>", " ", text))
+
+
 def test_maths_is_mathml_with_no_tex_left(site: Path) -> None:
-    """Every formula is MathML; no TeX delimiter survives outside a ``<math>`` element (the
-    text a reader without a script would see)."""
+    """Every formula is MathML, and no TeX survives on any page (notebooks, design notes,
+    API reference, nav and titles included): no command, delimiter, ``^{``, ``_{`` or ``$``
+    in the text outside ``<math>`` and code, and no command left as text inside a
+    ``<math>`` element."""
     pages = _pages(site)
     assert any("<math " in text for text in pages.values())
+    assert {site / "api" / "sim3.html", site / "notebooks" / "02_numerics.html"} <= set(pages)
+    found = {}
     for page, text in pages.items():
-        outside = re.sub(r"<math\b.*?</math>", "", text, flags=re.S)
-        outside = re.sub(r"<(script|code|pre)\b.*?</\1>", "", outside, flags=re.S | re.I)
-        for delimiter in ("\\(", "\\)", "\\[", "\\]", "$$"):
-            assert delimiter not in outside, (page.relative_to(site).as_posix(), delimiter)
+        name = page.relative_to(site).as_posix()
+        prose = _prose(text)
+        for match in _TEX.finditer(prose):
+            found.setdefault(name, prose[max(match.start() - 40, 0) : match.end() + 40].strip())
+        for math in _MATH_ELEMENT.findall(text):
+            if re.search(r">[^<]*\\", math):
+                found.setdefault(name, math)
+    assert not found, found
+
+
+def test_a_tex_command_mathml_cannot_show_fails_the_build() -> None:
+    """The hooks render what latex2mathml can show and raise, naming the page, on a
+    command it would leave as text or an operator name it cannot read."""
+    hooks = _hooks()
+    assert "<msub>" in hooks.to_mathml(r"T_{p,m}", "inline", "page.md")
+    assert "<mo>argmin</mo>" in hooks.to_mathml(r"\operatorname{argmin}_T", "inline", "page.md")
+    for tex in (r"\arg\min_T f", r"\big\| x \big\|", r"\operatorname{atan2}(y, x)", r"\unknown x"):
+        with pytest.raises(PluginError, match="page.md"):
+            hooks.to_mathml(tex, "inline", "page.md")
 
 
 def test_links_resolve_to_files(site: Path) -> None:
@@ -96,6 +134,118 @@ def test_links_resolve_to_files(site: Path) -> None:
             if not path.is_file():
                 missing.add((page.relative_to(site).as_posix(), target))
     assert not missing, sorted(missing)[:10]
+
+
+_ID = re.compile(r"\bid=\"([^\"]+)\"")
+_ANCHOR = re.compile(r"<a\b[^>]*?\bhref=\"([^\"]*#[^\"]*)\"", re.I)
+
+
+def test_anchors_lead_to_an_id(site: Path) -> None:
+    """Every link to a place in a page of the site (``#name`` in the same page,
+    ``page.html#name`` in another) names an id that page has: contents lists, permalinks,
+    cross-references and the API's autorefs all lead somewhere."""
+    pages = _pages(site)
+    ids = {page.resolve(): set(_ID.findall(text)) for page, text in pages.items()}
+    checked, missing = 0, set()
+    for page, text in pages.items():
+        if page.name == "404.html":
+            continue
+        for href in _ANCHOR.findall(text):
+            path, _, anchor = html.unescape(href).partition("#")
+            if not anchor or re.match(r"^[a-z][a-z0-9+.-]*:", path, re.I):
+                continue
+            target = (page.parent / path).resolve() if path else page.resolve()
+            checked += 1
+            if anchor not in ids.get(target, ()) and unquote(anchor) not in ids.get(target, ()):
+                missing.add((page.relative_to(site).as_posix(), href))
+    assert checked > 1000, checked
+    assert not missing, sorted(missing)[:20]
+
+
+def _nav_titles() -> dict[str, str]:
+    """The title mkdocs.yml's nav gives each page, by its path under docs/."""
+    config = yaml.safe_load((REPO / "mkdocs.yml").read_text(encoding="utf-8"))
+    titles: dict[str, str] = {}
+
+    def walk(items: list) -> None:
+        for item in items:
+            if isinstance(item, dict):
+                for title, value in item.items():
+                    walk(value) if isinstance(value, list) else titles.setdefault(value, title)
+
+    walk(config["nav"])
+    return titles
+
+
+def test_notebook_pages_keep_titles_and_headings(site: Path) -> None:
+    """A notebook page has the nav's title, and its contents list has every heading of the
+    notebook below the first (the theme lists the title heading's children), inline code
+    kept, linked to the heading's id on the page."""
+    titles = _nav_titles()
+    for notebook in sorted((REPO / "notebooks").glob("*.ipynb")):
+        text = (site / "notebooks" / f"{notebook.stem}.html").read_text(encoding="utf-8")
+        title = titles[f"notebooks/{notebook.name}"]
+        assert f"<title>{html.escape(title)} - jaxlie_geo</title>" in text, notebook.name
+        cells = json.loads(notebook.read_text(encoding="utf-8"))["cells"]
+        headings = [
+            line.lstrip("#").strip()
+            for cell in cells
+            if cell["cell_type"] == "markdown"
+            for line in "".join(cell["source"]).splitlines()
+            if re.match(r"#{2,6} ", line)
+        ]
+        link = r'<a href="#([^"]+)" class="md-nav__link">\s*<span class="md-ellipsis">'
+        contents = re.findall(link + r"\s*(.*?)\s*</span>", text, flags=re.S)
+        assert len({anchor for anchor, _ in contents}) == len(headings), notebook.name
+        shown = [
+            html.unescape(re.sub(r"<[^>]*>", " ", _MATH_ELEMENT.sub(" ", title))).split()
+            for _, title in contents
+        ]
+        for heading in headings:
+            words = re.sub(r"\$[^$]*\$", " ", heading).replace("`", " ").split()
+            assert any(all(w in s for w in words) for s in shown), (notebook.name, heading)
+            for code in re.findall(r"`([^`]+)`", heading):
+                assert any(f"<code>{html.escape(code)}</code>" in t for _, t in contents), code
+
+
+_CONFIG = re.compile(r'<script id="__config" type="application/json">(.*?)</script>', re.S)
+_SCRIPT = re.compile(r'<script src="([^"]+)"')
+
+
+def test_search_works_from_disk(site: Path) -> None:
+    """Search works with the site opened from disk (``file://``), with nothing to download:
+    every page has the search form; the theme's script reads the index from
+    ``search/search_index.js`` (a script, which a file page may load, unlike JSON); the
+    search worker it names is a file of the site, and the iframe-worker shim, a local
+    script loaded before the theme's, starts it where a browser will not start a Worker
+    from a file page. The index covers the pages in every part of the site, in English
+    (no language script for the worker to import)."""
+    for page in (site / "index.html", site / "api" / "so3.html", site / "design" / "index.html"):
+        text = page.read_text(encoding="utf-8")
+        assert '<form class="md-search__form" name="search">' in text, page
+        match = _CONFIG.search(text)
+        assert match, page
+        config = json.loads(match.group(1))
+        assert (page.parent / config["base"] / "search" / "search_index.js").is_file(), page
+        assert (page.parent / config["search"]).is_file(), config["search"]
+        scripts = _SCRIPT.findall(text)
+        shim = [s for s in scripts if "iframe-worker" in s]
+        bundle = [s for s in scripts if "/bundle." in s or s.startswith("bundle.")]
+        assert len(shim) == 1 and len(bundle) == 1, scripts
+        assert scripts.index(shim[0]) < scripts.index(bundle[0]), scripts
+        assert not re.match(r"^([a-z][a-z0-9+.-]*:)?//", shim[0], re.I), shim
+        code = (page.parent / shim[0]).read_text(encoding="utf-8")
+        assert 'location.protocol==="file:"&&(window.Worker=' in code, shim
+    prefix = "var __index = "
+    script = (site / "search" / "search_index.js").read_text(encoding="utf-8")
+    assert script.startswith(prefix)
+    index = json.loads(script[len(prefix) :])
+    assert index == json.loads((site / "search" / "search_index.json").read_text(encoding="utf-8"))
+    assert index["config"]["lang"] == ["en"]
+    located = {doc["location"].split("#")[0] for doc in index["docs"]}
+    assert all((site / location).is_file() for location in located if location), located
+    parts = ("quickstart", "api/so3", "notebooks/02_numerics", "design/index", "benchmarks/RESULTS")
+    assert {f"{part}.html" for part in parts} <= located
 
 
 def test_group_pages_list_members_in_one_order(site: Path) -> None:
