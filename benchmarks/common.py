@@ -222,19 +222,6 @@ def fmt_ratio(x: float) -> str:
     return f"{x:.2f}" if x < 10 else f"{x:.1f}" if x < 100 else f"{x:.0f}"
 
 
-def fmt_ulp(e: float | None) -> str:
-    """An error in ulp as the accuracy tables print it: "–" for none, 3 significant digits."""
-    if e is None or (isinstance(e, float) and math.isnan(e)):
-        return "–"
-    if not math.isfinite(e):
-        return "non-finite"
-    if e < 10:
-        return f"{e:.2f}"
-    if e < 1000:
-        return f"{e:.0f}"
-    return f"{e:.1e}"
-
-
 def sizes(data: dict) -> list:
     """The batch sizes of a run's results, ascending."""
     return sorted({r["n"] for r in data["results"]})

@@ -75,14 +75,13 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-from typing import Any, Dict, List, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import jax
 import jax.numpy as jnp
 import mpmath as mp  # type: ignore[import-untyped]
 import numpy as np
 
-from benchmarks.common import fmt_ulp as fmt_ulp
 from jaxlie_geo._xla import x64
 
 DPS = 60
@@ -982,3 +981,16 @@ def describe_case(cases: Cases, k: int, op: str) -> str:
     what = "params" if op == "log" else "tangent"
     sg = f" σ={cases.sigma[k]:.6g}" if cases.group == "Sim3" else ""
     return f"angle≈{cases.angle[k]:.6g}{sg} |v|={cases.size[k]:g} {what}=[{vals}]"
+
+
+def fmt_ulp(e: Optional[float]) -> str:
+    """An error in ulp as the accuracy tables print it: "–" for none, 3 significant digits."""
+    if e is None or (isinstance(e, float) and math.isnan(e)):
+        return "–"
+    if not math.isfinite(e):
+        return "non-finite"
+    if e < 10:
+        return f"{e:.2f}"
+    if e < 1000:
+        return f"{e:.0f}"
+    return f"{e:.1e}"

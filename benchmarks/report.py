@@ -37,7 +37,8 @@ import sys
 from pathlib import Path
 
 from benchmarks import common as C
-from benchmarks.common import GROUPS, OPS, fmt_ns, fmt_ulp, geomean, label, pretty_n, table
+from benchmarks.common import GROUPS, OPS, fmt_ns, geomean, label, pretty_n, table
+from benchmarks.mpref import fmt_ulp
 
 PLOT_NAME = "results.png"
 POSE_GRAPH_PLOT = "pose_graphs.png"

@@ -10,6 +10,7 @@ from importlib.metadata import version as _version
 from . import hints as hints
 from . import interop as interop
 from . import jacobians as jacobians
+from . import least_squares as least_squares
 from . import manifold as manifold
 from . import motion as motion
 from . import pose_graph as pose_graph
@@ -54,6 +55,7 @@ __all__ = [
     "hints",
     "interop",
     "jacobians",
+    "least_squares",
     "manifold",
     "motion",
     "pose_graph",

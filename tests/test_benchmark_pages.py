@@ -1,6 +1,6 @@
 """The results page and every figure the README and the guides copy from it are what the raw
 results render to (``benchmarks/report.py``): a stale copy, an unknown block or an edited
-figure fails here. No jax: rendering reads JSON and writes Markdown."""
+figure fails here. Rendering reads JSON and writes Markdown; it compiles nothing."""
 
 from __future__ import annotations
 

@@ -1,0 +1,198 @@
+"""``jaxlie_geo.least_squares``: the solve against an independent solver (scipy's
+``least_squares``, plain and with Huber's loss), optimality on groups, ``vmap`` against solving
+each problem alone, the implicit derivative against central differences of the solution,
+fixed variables, marginal covariances against (AᵀA)⁻¹, the stop reasons and the trace-time
+errors. Float64 (the test suite's default); the problems are small so that each compiles once."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.optimize
+
+import jaxlie_geo as jl
+from jaxlie_geo import least_squares as ls
+
+# -- a curve fit on arrays: y = a exp(b t) + c, against scipy ------------------------------
+
+T = np.linspace(0.0, 2.0, 25)
+Y = 1.5 * np.exp(-0.7 * T) + 0.3 + 0.01 * np.sin(7 * T)
+Y_OUTLIERS = Y.copy()
+Y_OUTLIERS[[3, 11, 19]] += np.array([0.8, -1.1, 0.9])
+
+
+def _curve(p, data):
+    t, y = data
+    return jnp.atleast_1d(p[0] * jnp.exp(p[1] * t) + p[2] - y)
+
+
+def _curve_factor(y, robust=None):
+    n = T.shape[0]
+    return ls.Factor(
+        _curve, (0,), (jnp.zeros(n, jnp.int32),), (jnp.asarray(T), jnp.asarray(y)), robust
+    )
+
+
+def _scipy_fit(y, loss="linear", f_scale=1.0):
+    fun = lambda p: p[0] * np.exp(p[1] * T) + p[2] - y  # noqa: E731
+    return scipy.optimize.least_squares(
+        fun, [1.0, 0.0, 0.0], loss=loss, f_scale=f_scale, xtol=1e-15, ftol=1e-15, gtol=1e-15
+    ).x
+
+
+@pytest.mark.parametrize("robust", [None, ("huber", 0.1)], ids=["plain", "huber"])
+def test_curve_fit_matches_scipy(robust) -> None:
+    y = Y if robust is None else Y_OUTLIERS
+    sol = ls.solve([_curve_factor(y, robust)], (jnp.array([[1.0, 0.0, 0.0]]),), tolerance=1e-15)
+    ref = _scipy_fit(y) if robust is None else _scipy_fit(y, loss="huber", f_scale=robust[1])
+    assert bool(sol.converged), ls.StopReason(int(sol.stop_reason))
+    np.testing.assert_allclose(np.asarray(sol.variables[0][0]), ref, rtol=1e-7, atol=1e-9)
+
+
+# -- a small SE2 pose graph ----------------------------------------------------------------
+
+N = 5
+IA = jnp.array([0, 1, 2, 3, 0])
+IB = jnp.array([1, 2, 3, 4, 4])
+
+
+def _graph():
+    truth = jl.SE2.exp(jnp.array([[0.0, 0.0, 0.0], [1, 0.1, 0.3], [2, 0.5, 0.7], [2.5, 1.5, 1.2],
+                                  [1.8, 2.2, 2.0]]))  # fmt: skip
+    noise = 0.02 * jax.random.normal(jax.random.key(0), (IA.shape[0], 3))
+    meas = (truth[IA].inverse() @ truth[IB]) @ jl.SE2.exp(noise)
+    init = truth @ jl.SE2.exp(0.1 * jax.random.normal(jax.random.key(1), (N, 3)))
+    return truth, meas, init
+
+
+def _between(a, b, z):
+    return (z.inverse() @ (a.inverse() @ b)).log()
+
+
+def _prior(a, z):
+    return (z.inverse() @ a).log()
+
+
+def _factors(meas, anchor):
+    return [
+        ls.Factor(_between, (0, 0), (IA, IB), meas),
+        ls.Factor(_prior, (0,), (jnp.array([0]),), anchor),
+    ]
+
+
+def _solve_graph(meas_params, init_params, anchor_params):
+    meas, init, anchor = jl.SE2(meas_params), jl.SE2(init_params), jl.SE2(anchor_params)
+    return ls.solve(_factors(meas, anchor), (init,), tolerance=1e-14)
+
+
+_solve_graph_jit = jax.jit(_solve_graph)
+
+
+def test_pose_graph_reaches_a_stationary_point_and_vmap_equals_each_alone() -> None:
+    truth, meas, init = _graph()
+    anchor = truth[jnp.array([0])]
+    starts = jl.SE2.exp(
+        init.log()[None] + 0.05 * jax.random.normal(jax.random.key(2), (3, N, 3))
+    ).parameters()
+    batched = jax.vmap(_solve_graph_jit, in_axes=(None, 0, None))(
+        meas.parameters(), starts, anchor.parameters()
+    )
+    for i in range(3):
+        alone = _solve_graph_jit(meas.parameters(), starts[i], anchor.parameters())
+        assert bool(alone.converged)
+        np.testing.assert_allclose(
+            batched.variables[0].parameters()[i], alone.variables[0].parameters(), atol=1e-12
+        )
+        assert float(alone.cost) < float(alone.initial_cost)
+        # The tangent gradient of the cost vanishes at the solution (autodiff, not the solver's
+        # normal equations).
+        x = alone.variables[0]
+        grad = jax.grad(lambda d, x=x: ls.cost(_factors(meas, anchor), (x @ jl.SE2.exp(d),)))(
+            jnp.zeros((N, 3))
+        )
+        assert float(jnp.max(jnp.abs(grad))) < 1e-9
+
+
+def test_implicit_derivative_equals_central_differences() -> None:
+    truth, meas, init = _graph()
+    anchor = truth[jnp.array([0])].parameters()
+
+    def loss(meas_params):
+        sol = _solve_graph_jit(meas_params, init.parameters(), anchor)
+        return jnp.sum(sol.variables[0].translation()[N - 1] ** 2) + sol.cost
+
+    p = meas.parameters()
+    g = jax.grad(loss)(p)
+    assert bool(jnp.all(jnp.isfinite(g)))
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        d = jnp.asarray(rng.standard_normal(p.shape))
+        h = 1e-6
+        fd = (loss(p + h * d) - loss(p - h * d)) / (2 * h)
+        np.testing.assert_allclose(float(jnp.sum(g * d)), float(fd), rtol=1e-6)
+
+
+def test_fixed_variables_stay_and_marginals_equal_the_linear_covariance() -> None:
+    # A linear problem on arrays: r = A x − b per row, x in R², one set of 2 variables with
+    # the second held fixed; the marginal covariance of a linear least-squares problem is
+    # (AᵀA)⁻¹ exactly.
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((12, 2))
+    b = rng.standard_normal(12)
+
+    def row(x, data):
+        a, bb = data
+        return jnp.atleast_1d(a @ x - bb)
+
+    factor = ls.Factor(row, (0,), (jnp.zeros(12, jnp.int32),), (jnp.asarray(A), jnp.asarray(b)))
+    x0 = jnp.array([[0.0, 0.0], [5.0, -3.0]])
+    sol = ls.solve([factor], (x0,), fixed=(jnp.array([False, True]),), tolerance=1e-14)
+    np.testing.assert_array_equal(np.asarray(sol.variables[0][1]), [5.0, -3.0])
+    np.testing.assert_allclose(
+        np.asarray(sol.variables[0][0]), np.linalg.lstsq(A, b, rcond=None)[0], rtol=1e-10
+    )
+    one = ls.solve([factor], (x0[:1],), tolerance=1e-14)
+    cov = ls.marginal_covariances([factor], one)
+    np.testing.assert_allclose(np.asarray(cov), np.linalg.inv(A.T @ A), rtol=1e-10)
+
+
+def test_stop_reasons() -> None:
+    factor = _curve_factor(Y)
+    x0 = (jnp.array([[1.0, 0.0, 0.0]]),)
+    none = ls.solve([factor], x0, max_iterations=0)
+    assert int(none.stop_reason) == ls.StopReason.MAX_ITERATIONS and int(none.iterations) == 0
+    np.testing.assert_array_equal(np.asarray(none.variables[0]), np.asarray(x0[0]))
+    assert not bool(none.converged)
+    two = ls.solve([factor], x0, max_iterations=2)
+    assert int(two.iterations) == 2 and int(two.stop_reason) == ls.StopReason.MAX_ITERATIONS
+    # At (1, 0, 0) the columns of a and c are equal: a singular system, which Gauss–Newton
+    # reports; from (1, −0.5, 0.1) it converges.
+    singular = ls.solve([factor], x0, method="gn")
+    assert int(singular.stop_reason) == ls.StopReason.NON_FINITE_STEP
+    np.testing.assert_array_equal(np.asarray(singular.variables[0]), np.asarray(x0[0]))
+    gn = ls.solve([factor], (jnp.array([[1.0, -0.5, 0.1]]),), method="gn", tolerance=1e-12)
+    assert bool(gn.converged) and float(gn.damping) == 0.0
+    np.testing.assert_allclose(np.asarray(gn.variables[0][0]), _scipy_fit(Y), rtol=1e-7)
+
+
+def test_errors_name_the_problem() -> None:
+    x = (jnp.zeros((2, 3)),)
+    good = lambda v: v  # noqa: E731
+    with pytest.raises(IndexError, match=r"outside \[0, 2\)"):
+        ls.solve([ls.Factor(good, (0,), (jnp.array([0, 2]),))], x)
+    with pytest.raises(ValueError, match="names variable set 1"):
+        ls.solve([ls.Factor(good, (1,), (jnp.array([0]),))], x)
+    with pytest.raises(ValueError, match="int array"):
+        ls.solve([ls.Factor(good, (0,), (jnp.array([0.0]),))], x)
+    with pytest.raises(ValueError, match="must return a vector"):
+        jax.eval_shape(
+            lambda: ls.solve([ls.Factor(lambda v: jnp.sum(v), (0,), (jnp.array([0]),))], x)
+        )
+    with pytest.raises(ValueError, match="exactly one batch axis"):
+        ls.solve([ls.Factor(good, (0,), (jnp.array([0]),))], (jnp.zeros(3),))
+    with pytest.raises(ValueError, match="method must be"):
+        ls.solve([], x, method="newton")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="robust must be"):
+        ls.Factor(good, (0,), (jnp.array([0]),), robust=("tukey", 1.0))  # type: ignore[arg-type]
