@@ -35,12 +35,13 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
-from typing import Any, Callable, Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Literal, NamedTuple, Optional, Sequence, Tuple, Union
 
 import jax
 import jax.numpy as jnp
 import numpy as onp
 
+from . import _sparse
 from ._base import MatrixLieGroup
 
 __all__ = [
@@ -266,54 +267,87 @@ def _dtype(variables: Tuple[Variable, ...]) -> Any:
     return jnp.result_type(*leaves) if leaves else jnp.float32
 
 
-def _normal_equations(
-    factors: Sequence[Factor], variables: Tuple[Variable, ...]
-) -> Tuple[jax.Array, jax.Array, jax.Array]:
-    """The cost, H = JᵀWJ and g = JᵀW r (W the robust weights ρ'), dense, in the flat
-    tangent of ``_retract``."""
+class _Block(NamedTuple):
+    """One factor set, linearised: whitened (and robustly reweighted) residuals e ``(F, r)``,
+    the Jacobian blocks of all its arguments side by side M ``(F, r, K)``, and the flat
+    tangent coordinates of those columns ``(F, K)``."""
+
+    e: jax.Array
+    M: jax.Array
+    cols: jax.Array
+
+
+def _columns(f: Factor, variables: Tuple[Variable, ...]) -> jax.Array:
+    """``(F, K)``: the flat tangent coordinate of each of a factor's Jacobian columns."""
     offsets = _offsets(variables)
-    n = offsets[-1]
+    parts = []
+    for s, idx in zip(f.sets, f.indices):
+        k = _tangent_dim(variables[s])
+        parts.append(offsets[s] + jnp.asarray(idx)[:, None] * k + jnp.arange(k))
+    return jnp.concatenate(parts, axis=1)
+
+
+def _linearise(
+    factors: Sequence[Factor], variables: Tuple[Variable, ...]
+) -> Tuple[jax.Array, Tuple[_Block, ...]]:
+    """The cost and every factor set's ``_Block`` at the variables: Jacobians by forward-mode
+    autodiff in the right-perturbation tangent of each argument; a robust kernel reweights
+    e and M by √ρ'(‖r‖²) (iteratively reweighted least squares)."""
     dtype = _dtype(variables)
-    H = jnp.zeros((n, n), dtype)
-    g = jnp.zeros((n,), dtype)
     total = jnp.zeros((), dtype)
+    blocks = []
     for f in factors:
         args = tuple(_take(variables[s], jnp.asarray(idx)) for s, idx in zip(f.sets, f.indices))
         dims = tuple(_tangent_dim(variables[s]) for s in f.sets)
 
         def one(arg_values, data, f=f, dims=dims):
-            def at(deltas):
+            def at(delta):
+                parts = jnp.split(delta, onp.cumsum(dims)[:-1])
                 moved = [
                     a @ type(a).exp(d) if isinstance(a, MatrixLieGroup) else a + d
-                    for a, d in zip(arg_values, deltas)
+                    for a, d in zip(arg_values, parts)
                 ]
                 return f.residual(*moved) if f.data is None else f.residual(*moved, data)
 
-            zeros = tuple(jnp.zeros((k,), dtype) for k in dims)
-            r = at(zeros)
-            jac = jax.jacfwd(at)(zeros)  # one (r, k) block per argument
-            return r, jac
+            zero = jnp.zeros((sum(dims),), dtype)
+            return at(zero), jax.jacfwd(at)(zero)
 
-        r, jac = jax.vmap(one)(args, f.data)
+        r, M = jax.vmap(one)(args, f.data)
         if r.ndim != 2:
             raise ValueError(
                 f"least_squares: a residual must return a vector (r,), got shape {r.shape[1:]}"
             )
-        s = jnp.sum(r * r, axis=-1)
-        rho, w = _rho(f.robust, s)
+        rho, w = _rho(f.robust, jnp.sum(r * r, axis=-1))
         total = total + 0.5 * jnp.sum(rho)
         root = jnp.sqrt(w)[:, None]
-        r = root * r
-        jac = [root[..., None] * J for J in jac]
-        cols = [
-            offsets[s] + jnp.asarray(idx)[:, None] * k + jnp.arange(k)
-            for s, idx, k in zip(f.sets, f.indices, dims)
-        ]
-        for Ja, ca in zip(jac, cols):
-            g = g.at[ca].add(jnp.einsum("fr,frk->fk", r, Ja))
-            for Jb, cb in zip(jac, cols):
-                H = H.at[ca[:, :, None], cb[:, None, :]].add(jnp.einsum("frk,frl->fkl", Ja, Jb))
-    return total, H, g
+        blocks.append(_Block(root * r, root[..., None] * M, _columns(f, variables)))
+    return total, tuple(blocks)
+
+
+def _gradient(blocks: Sequence[_Block], n: int) -> jax.Array:
+    """g = Σ Mᵀe, flat ``(n,)``."""
+    g = jnp.zeros((n,), blocks[0].e.dtype if blocks else jnp.float32)
+    for b in blocks:
+        g = g.at[b.cols].add(jnp.einsum("fr,frk->fk", b.e, b.M))
+    return g
+
+
+def _dense_hessian(blocks: Sequence[_Block], n: int) -> jax.Array:
+    """H = Σ MᵀM, dense ``(n, n)``."""
+    H = jnp.zeros((n, n), blocks[0].e.dtype if blocks else jnp.float32)
+    for b in blocks:
+        H = H.at[b.cols[:, :, None], b.cols[:, None, :]].add(jnp.einsum("frk,frl->fkl", b.M, b.M))
+    return H
+
+
+def _normal_equations(
+    factors: Sequence[Factor], variables: Tuple[Variable, ...]
+) -> Tuple[jax.Array, jax.Array, jax.Array]:
+    """The cost, H = JᵀWJ and g = JᵀW r (W the robust weights ρ'), dense, in the flat
+    tangent of ``_retract``."""
+    n = _offsets(variables)[-1]
+    total, blocks = _linearise(factors, variables)
+    return total, _dense_hessian(blocks, n), _gradient(blocks, n)
 
 
 def _free_mask(variables: Tuple[Variable, ...], fixed: Any) -> jax.Array:
@@ -336,6 +370,171 @@ def _damped_solve(H, g, damping, free):
     return -jnp.where(free, jax.scipy.linalg.cho_solve(c, jnp.where(free, g, 0.0)), 0.0)
 
 
+# -- linear solvers --------------------------------------------------------------------
+#
+# Each is a pair: ``system(blocks, n) -> (state, diagonal of H)``, what the loop keeps while
+# it tries dampings at one point, and ``step(state, g, damping, free) -> δ``. Both run
+# inside the loop; the host solvers call out through ``jax.pure_callback``.
+
+
+def _diagonal_blocks(factors, blocks: Sequence[_Block], variables) -> Tuple[jax.Array, ...]:
+    """Per variable set, H's diagonal blocks ``(n_s, k_s, k_s)``."""
+    out = [
+        jnp.zeros((_count(v), _tangent_dim(v), _tangent_dim(v)), _dtype(variables))
+        for v in variables
+    ]
+    for f, b in zip(factors, blocks):
+        o = 0
+        for s, idx in zip(f.sets, f.indices):
+            k = _tangent_dim(variables[s])
+            Ma = b.M[:, :, o : o + k]
+            out[s] = out[s].at[jnp.asarray(idx)].add(jnp.einsum("frk,frl->fkl", Ma, Ma))
+            o += k
+    return tuple(out)
+
+
+def _flat_diagonal(diagonal_blocks: Sequence[jax.Array]) -> jax.Array:
+    return jnp.concatenate([jnp.diagonal(D, axis1=-2, axis2=-1).ravel() for D in diagonal_blocks])
+
+
+def _matvec(blocks: Sequence[_Block], x: jax.Array) -> jax.Array:
+    """H x = Σ Mᵀ(M x), matrix-free."""
+    y = jnp.zeros_like(x)
+    for b in blocks:
+        u = jnp.einsum("frk,fk->fr", b.M, x[b.cols])
+        y = y.at[b.cols].add(jnp.einsum("frk,fr->fk", b.M, u))
+    return y
+
+
+def _block_jacobi(diagonal_blocks, damping, free, variables) -> Callable:
+    """r ↦ (diagonal blocks + diag(damping))⁻¹ r per variable element, identity on the fixed
+    coordinates."""
+    offsets = _offsets(variables)
+    inverses = []
+    for s, D in enumerate(diagonal_blocks):
+        n, k = D.shape[0], D.shape[-1]
+        f = free[offsets[s] : offsets[s + 1]].reshape(n, k)
+        d = jnp.where(f, damping[offsets[s] : offsets[s + 1]].reshape(n, k), 1.0)
+        A = jnp.where(f[:, :, None] & f[:, None, :], D, 0.0) + d[:, :, None] * jnp.eye(k)
+        inverses.append(jnp.linalg.inv(A))
+
+    def apply(r):
+        parts = []
+        for s, inv in enumerate(inverses):
+            n, k = inv.shape[0], inv.shape[-1]
+            rs = r[offsets[s] : offsets[s + 1]].reshape(n, k)
+            parts.append(jnp.einsum("nkl,nl->nk", inv, rs).ravel())
+        return jnp.concatenate(parts)
+
+    return apply
+
+
+def _cg(matvec, rhs, precondition, tolerance, max_iterations):
+    x, _ = jax.scipy.sparse.linalg.cg(
+        matvec, rhs, tol=tolerance, maxiter=max_iterations, M=precondition
+    )
+    return x
+
+
+@dataclasses.dataclass(frozen=True)
+class _HostPattern:
+    """The upper triangle of H in compressed-column form, built once per problem structure
+    from the factors' concrete columns, and the host solver that factorises it (symbolic
+    analysis once, numeric at every damping). Hashable by identity: ``solve`` keeps one per
+    structure, so ``jit`` reuses its program."""
+
+    size: int
+    nnz: int
+    indices: onp.ndarray
+    indptr: onp.ndarray
+    columns: onp.ndarray
+    scatter: onp.ndarray
+    diagonal: onp.ndarray
+    bandwidth: int
+    triu: Tuple[Tuple[onp.ndarray, onp.ndarray], ...]
+    backend: str
+    solver: Any = dataclasses.field(compare=False, hash=False)
+
+    __hash__ = object.__hash__
+    __eq__ = object.__eq__  # type: ignore[assignment]
+
+    @staticmethod
+    def build(cols: Sequence[onp.ndarray], size: int, backend: str) -> "_HostPattern":
+        rows_all, cols_all, triu = [], [], []
+        for c in cols:
+            p, q = onp.triu_indices(c.shape[1])
+            r, cc = c[:, p], c[:, q]
+            rows_all.append(onp.minimum(r, cc).ravel())
+            cols_all.append(onp.maximum(r, cc).ravel())
+            triu.append((p, q))
+        row, col = onp.concatenate(rows_all), onp.concatenate(cols_all)
+        diagonal = onp.arange(size)
+        keys = onp.concatenate([col * size + row, diagonal * size + diagonal])
+        unique, inverse = onp.unique(keys, return_inverse=True)
+        indices = (unique % size).astype(onp.int64)
+        indptr = onp.searchsorted(unique // size, onp.arange(size + 1)).astype(onp.int64)
+        columns = onp.repeat(onp.arange(size), onp.diff(indptr))
+        fields = dict(
+            size=size,
+            nnz=len(unique),
+            indices=indices,
+            indptr=indptr,
+            columns=columns,
+            scatter=inverse[: len(row)].astype(onp.int64),
+            diagonal=inverse[len(row) :].astype(onp.int64),
+            bandwidth=int(onp.max(columns - indices)),
+            triu=tuple(triu),
+            backend=backend,
+        )
+        pattern = _HostPattern(**fields, solver=None)
+        solver = (
+            _sparse.BandedCholesky(pattern, dense=False)  # type: ignore[arg-type]
+            if backend == "banded"
+            else _sparse.SparseCholesky(pattern, backend)  # type: ignore[arg-type]
+        )
+        object.__setattr__(pattern, "solver", solver)
+        return pattern
+
+    def solve(self, values, damping, g, free) -> onp.ndarray:
+        """The host side: assemble, damp, mask the fixed coordinates, factorise, solve."""
+        values = onp.asarray(values, onp.float64)
+        free = onp.asarray(free, bool)
+        data = onp.bincount(self.scatter, weights=values, minlength=self.nnz)
+        data = onp.where(free[self.indices] & free[self.columns], data, 0.0)
+        damp = onp.where(free, onp.asarray(damping, onp.float64), 1.0)
+        g = onp.where(free, onp.asarray(g, onp.float64), 0.0)
+        delta = self.solver.solve(data, damp, g)
+        return onp.where(free, delta, 0.0)
+
+
+_PATTERNS: dict = {}
+
+
+def _host_pattern(factors, variables, backend: str) -> _HostPattern:
+    """The ``_HostPattern`` of a structure, built once (keyed by the index arrays' bytes)."""
+    cols = []
+    for f in factors:
+        for idx in f.indices:
+            if isinstance(idx, jax.core.Tracer):
+                raise ValueError(
+                    f"least_squares.solve: linear_solver={backend!r} builds H's sparsity "
+                    "pattern on the host and needs concrete index arrays; close over them "
+                    "instead of passing them through jit or vmap, or use 'dense' or 'pcg'"
+                )
+    offsets = _offsets(variables)
+    for f in factors:
+        parts = []
+        for s, idx in zip(f.sets, f.indices):
+            k = _tangent_dim(variables[s])
+            parts.append(offsets[s] + onp.asarray(idx)[:, None] * k + onp.arange(k))
+        cols.append(onp.concatenate(parts, axis=1))
+    size = offsets[-1]
+    key = (backend, size, tuple((c.shape, hash(c.tobytes())) for c in cols))
+    if key not in _PATTERNS:
+        _PATTERNS[key] = _HostPattern.build(cols, size, backend)
+    return _PATTERNS[key]
+
+
 # -- the loop --------------------------------------------------------------------------
 
 
@@ -346,24 +545,69 @@ class _Options:
     tolerance: float
     initial_damping: float
     diagonal_damping: bool
+    linear_solver: str  # "dense", "pcg" or "host"
+    cg_tolerance: float
+    cg_max_iterations: int
+    pattern: Optional[_HostPattern] = None
+
+
+def _system(opts: _Options, factors, variables):
+    """The cost, the state the linear solver keeps at one point, g and diag(H)."""
+    n = _offsets(variables)[-1]
+    c, blocks = _linearise(factors, variables)
+    g = _gradient(blocks, n)
+    if opts.linear_solver == "dense":
+        H = _dense_hessian(blocks, n)
+        return c, H, g, jnp.diagonal(H)
+    D = _diagonal_blocks(factors, blocks, variables)
+    if opts.linear_solver == "pcg":
+        return c, (blocks, D), g, _flat_diagonal(D)
+    assert opts.pattern is not None
+    values = jnp.concatenate(
+        [jnp.einsum("frk,frl->fkl", b.M, b.M)[:, p, q].ravel() for b, (p, q) in
+         zip(blocks, opts.pattern.triu)]
+    )  # fmt: skip
+    return c, values, g, _flat_diagonal(D)
+
+
+def _step(opts: _Options, variables, state, g, damping, free) -> jax.Array:
+    """δ = −(H + diag(damping))⁻¹ g on the free coordinates."""
+    if opts.linear_solver == "dense":
+        return _damped_solve(state, g, damping, free)
+    if opts.linear_solver == "pcg":
+        blocks, D = state
+        matvec = lambda v: (  # noqa: E731
+            jnp.where(free, _matvec(blocks, jnp.where(free, v, 0.0)), 0.0)
+            + jnp.where(free, damping, 1.0) * v
+        )
+        precondition = _block_jacobi(D, damping, free, variables)
+        rhs = -jnp.where(free, g, 0.0)
+        return _cg(matvec, rhs, precondition, opts.cg_tolerance, opts.cg_max_iterations)
+    pattern = opts.pattern
+    assert pattern is not None
+    out = jax.ShapeDtypeStruct(g.shape, g.dtype)
+    host = lambda *a: onp.asarray(pattern.solve(*a), g.dtype)  # noqa: E731
+    return jax.pure_callback(host, out, state, damping, g, free, vmap_method="sequential")
 
 
 def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
     """The loop. Each pass linearises if x moved (and stops on the decrease or the iteration
-    limit), then tries one damped step; ``_normal_equations`` and ``cost`` are traced once
+    limit), then tries one damped step; the linearisation and the cost are traced once
     each."""
     free = _free_mask(variables, fixed)
     lm = opts.method == "lm"
     dtype = _dtype(variables)
-    n = _offsets(variables)[-1]
     R = StopReason
     c0 = cost(factors, variables)
+    shapes = jax.eval_shape(lambda: _system(opts, factors, variables))
+    zeros = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes)
     st0 = dict(
         x=variables,
         cost=c0,
-        H=jnp.zeros((n, n), dtype),
-        g=jnp.zeros((n,), dtype),
-        fresh=jnp.asarray(False),  # H and g are those of x
+        system=zeros[1],
+        g=zeros[2],
+        diag=zeros[3],
+        fresh=jnp.asarray(False),  # the system is that of x
         lam=jnp.asarray(opts.initial_damping if lm else 0.0, dtype),
         nu=jnp.asarray(DAMPING_FACTOR, dtype),
         it=jnp.asarray(0, jnp.int32),
@@ -372,19 +616,19 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
 
     def body(st):
         moved = ~st["fresh"]
-        c, H, g = jax.lax.cond(
+        c, system, g, diag = jax.lax.cond(
             moved,
-            lambda: _normal_equations(factors, st["x"]),
-            lambda: (st["cost"], st["H"], st["g"]),
+            lambda: _system(opts, factors, st["x"]),
+            lambda: (st["cost"], st["system"], st["g"], st["diag"]),
         )
         # The decrease between the costs at two linearisation points.
         decrease = jnp.where(st["cost"] > 0, (st["cost"] - c) / st["cost"], 0.0)
         converged = moved & (st["it"] > 0) & (decrease < opts.tolerance)
         at_limit = moved & (st["it"] >= opts.max_iterations)
 
-        diag = jnp.diagonal(H)
         D = st["lam"] * (jnp.maximum(diag, DAMPING_FLOOR) if opts.diagonal_damping else 1.0)
-        delta = _damped_solve(H, g, D, free)
+        D = jnp.broadcast_to(D, g.shape)
+        delta = _step(opts, variables, system, g, D, free)
         predicted = 0.5 * (jnp.sum(D * delta * delta) - jnp.sum(g * delta))
         finite = jnp.isfinite(predicted)
         # Only the first, least damped step at a point speaks for the model: raising λ
@@ -421,8 +665,9 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
         return dict(
             x=x,
             cost=c,
-            H=H,
+            system=system,
             g=g,
+            diag=diag,
             fresh=~go,
             lam=lam,
             nu=nu,
@@ -465,16 +710,35 @@ def _solve_bwd(opts, res, cot):
     factors, initial, sol, fixed = res
     x = sol.variables
     n = _offsets(x)[-1]
-    dtype = _dtype(x)
-    zero = jnp.zeros((n,), dtype)
+    zero = jnp.zeros((n,), _dtype(x))
     # The cotangent of the parameters, pulled back to x's tangent: d/dδ ⟨x̄, x ⊕ δ⟩ at 0.
     _, pull = jax.vjp(lambda d: _retract(x, d), zero)
     (xbar,) = pull(cot.variables)
     free = _free_mask(x, fixed)
-    H = jax.hessian(lambda d: cost(factors, _retract(x, d)))(zero)
-    diag = jnp.diagonal(H)
-    D = sol.damping * (jnp.maximum(diag, DAMPING_FLOOR) if opts.diagonal_damping else 1.0)
-    w = -_damped_solve(H, xbar, D, free)  # (H + λD)⁻¹ x̄ on the free coordinates
+    rhs = jnp.where(free, xbar, 0.0)
+    curvature = lambda d: cost(factors, _retract(x, d))  # noqa: E731
+    if opts.linear_solver == "dense":
+        H = jax.hessian(curvature)(zero)
+        diag = jnp.diagonal(H)
+    else:
+        _, blocks = _linearise(factors, x)
+        Dblocks = _diagonal_blocks(factors, blocks, x)
+        diag = _flat_diagonal(Dblocks)
+    damping = sol.damping * (jnp.maximum(diag, DAMPING_FLOOR) if opts.diagonal_damping else 1.0)
+    damping = jnp.broadcast_to(damping, zero.shape)
+    if opts.linear_solver == "dense":
+        w = -_damped_solve(H, rhs, damping, free)  # (H + λD)⁻¹ x̄ on the free coordinates
+    else:
+        # The exact Hessian's products (forward over reverse), by conjugate gradients
+        # preconditioned with the Gauss–Newton blocks.
+        gradient_at = jax.grad(curvature)
+
+        def matvec(v):
+            hv = jax.jvp(gradient_at, (zero,), (jnp.where(free, v, 0.0),))[1]
+            return jnp.where(free, hv, 0.0) + jnp.where(free, damping, 1.0) * v
+
+        precondition = _block_jacobi(Dblocks, damping, free, x)
+        w = _cg(matvec, rhs, precondition, opts.cg_tolerance, opts.cg_max_iterations)
     w = jnp.where(jnp.all(jnp.isfinite(w)), w, 0.0)
 
     # θ̄ = −(∂G/∂θ)ᵀ w, G(θ) the tangent gradient at the fixed x; the costs at x* and at the
@@ -495,6 +759,10 @@ def _solve(opts, factors, variables, fixed):
     return _solve_values(opts, factors, variables, fixed)
 
 
+#: Below this many unknowns ``"auto"`` takes the dense Cholesky.
+DENSE_LIMIT = 1000
+
+
 def solve(
     factors: Sequence[Factor],
     variables: Sequence[Variable],
@@ -505,6 +773,9 @@ def solve(
     tolerance: float = 1e-7,
     initial_damping: float = 1e-5,
     diagonal_damping: bool = False,
+    linear_solver: Literal["auto", "dense", "pcg", "cholmod", "qdldl", "banded"] = "auto",
+    cg_tolerance: float = 1e-10,
+    cg_max_iterations: int = 2000,
 ) -> Solution:
     """Minimise ½ Σ ρ(‖r‖²) over the variables, from their given values.
 
@@ -523,6 +794,17 @@ def solve(
             relative, or when the first (least damped) step of an iteration is predicted to.
         initial_damping: λ at the start (``"lm"``).
         diagonal_damping: D = max(diag H, 10⁻⁶) (Marquardt) instead of D = I.
+        linear_solver: how (H + λD)δ = −g is solved, a choice made once, outside the loop:
+            ``"dense"``, Cholesky of all of H on the device (N unknowns: O(N³)); ``"pcg"``,
+            conjugate gradients on the device with the block-Jacobi preconditioner (the
+            inverse of H's diagonal block of each element), matrix-free; ``"cholmod"``,
+            ``"qdldl"`` or ``"banded"``, a sparse (or banded) Cholesky on the host through
+            ``jax.pure_callback``, its symbolic analysis done once per structure (these need
+            the index arrays concrete: close over them). ``"auto"``: dense up to
+            ``DENSE_LIMIT`` unknowns, else CHOLMOD or QDLDL when installed and the indices
+            are concrete, else PCG.
+        cg_tolerance, cg_max_iterations: PCG's relative residual and iteration limit (also
+            those of the implicit derivative's solve, for every solver but ``"dense"``).
 
     Returns:
         A ``Solution``. Under ``jax.vmap`` (initial values, data and indices batched over
@@ -555,9 +837,34 @@ def solve(
             raise ValueError(
                 f"least_squares.solve: fixed has {len(fixed)} entries for {len(variables)} sets"
             )
-    opts = _Options(method, max_iterations, float(tolerance), float(initial_damping),
-                    bool(diagonal_damping))  # fmt: skip
+    solvers = ("auto", "dense", "pcg", "cholmod", "qdldl", "banded")
+    if linear_solver not in solvers:
+        raise ValueError(
+            f"least_squares.solve: linear_solver must be one of {solvers}, got {linear_solver!r}"
+        )
+    kind, pattern = _choose(linear_solver, factors, variables)
+    opts = _Options(
+        method, max_iterations, float(tolerance), float(initial_damping), bool(diagonal_damping),
+        kind, float(cg_tolerance), int(cg_max_iterations), pattern,
+    )  # fmt: skip
     return _solve(opts, factors, variables, fixed)
+
+
+def _choose(name: str, factors, variables) -> Tuple[str, Optional[_HostPattern]]:
+    """The solver kind (``"dense"``, ``"pcg"``, ``"host"``) and the host pattern."""
+    if name == "auto":
+        concrete = not any(isinstance(i, jax.core.Tracer) for f in factors for i in f.indices)
+        if _offsets(variables)[-1] <= DENSE_LIMIT:
+            name = "dense"
+        elif concrete and _sparse.installed("cholmod"):
+            name = "cholmod"
+        elif concrete and _sparse.installed("qdldl"):
+            name = "qdldl"
+        else:
+            name = "pcg"
+    if name in ("dense", "pcg"):
+        return name, None
+    return "host", _host_pattern(factors, variables, name)
 
 
 def marginal_covariances(factors: Sequence[Factor], solution: Solution) -> jax.Array:

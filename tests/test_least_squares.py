@@ -78,7 +78,7 @@ def _prior(a, z):
 def _factors(meas, anchor):
     return [
         ls.Factor(_between, (0, 0), (IA, IB), meas),
-        ls.Factor(_prior, (0,), (jnp.array([0]),), anchor),
+        ls.Factor(_prior, (0,), (np.array([0]),), anchor),
     ]
 
 
