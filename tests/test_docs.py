@@ -403,6 +403,22 @@ def test_readme_links_resolve() -> None:
     assert not missing, f"README.md links to missing files: {missing}"
 
 
+def test_gpu_section_of_the_speed_page_names_the_runs_commit_and_date() -> None:
+    """The speed page's GPU figures come from runs on another machine at an older commit
+    (``benchmarks/raw/gpu-*``): its GPU section says, before any figure, which commit and
+    date they were measured at, those of every raw file it summarises."""
+    speed = (DOCS / "speed.md").read_text(encoding="utf-8")
+    section = speed.split("\n## GPU\n", 1)[1].split("\n## ", 1)[0]
+    label = section.strip().split("\n\n", 1)[0]
+    runs = sorted((REPO / "benchmarks" / "raw").glob("gpu-*/speed-*.json"))
+    assert runs
+    for run in runs:
+        machine = json.loads(run.read_text(encoding="utf-8"))["machine"]
+        assert f"commit {machine['commit']}" in label, (run.name, label)
+        assert machine["date"].split()[0] in label, (run.name, label)
+        assert machine["device_kind"] in label, (run.name, label)
+
+
 def test_results_page_is_generated_from_the_raw_results() -> None:
     """benchmarks/RESULTS.md is exactly what ``python -m benchmarks.report`` renders from
     benchmarks/raw/: nobody edits the page by hand, and a new raw result regenerates it."""
