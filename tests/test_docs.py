@@ -332,7 +332,7 @@ def test_notebook_maths_after_a_nested_block_is_rendered() -> None:
 def test_notebook_contents_are_read_from_the_rendered_headings() -> None:
     """A notebook page's contents: one entry per heading, nested by level, each linking to
     the heading's id and showing its HTML, inline code included."""
-    permalink = '<a class="anchor-link" href="#{0}">¶</a>'
+    permalink = '<a class="headerlink" href="#{0}">¶</a>'
     page = "".join(
         f'<h{level} id="{anchor}">{title}{permalink.format(anchor)}</h{level}><p>text</p>'
         for level, anchor, title in [
