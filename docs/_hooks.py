@@ -100,6 +100,9 @@ def _notebook_mathml(match: re.Match, where: str) -> str:
 
 def _notebook_content(content: str, where: str) -> str:
     content = _REMOTE_SCRIPTS.sub("", content)
+    # nbconvert's heading permalinks as the theme's, which it shows on hover and the search
+    # index leaves out of the section titles.
+    content = content.replace('<a class="anchor-link" href="#', '<a class="headerlink" href="#')
     name = posixpath.basename(where)
     content = (
         f'<p><em>The notebook: <a href="{name}"><code>{name}</code></a>. This page shows it as '
@@ -138,9 +141,10 @@ def markdown_cells(content: str) -> list[tuple[int, int]]:
     return spans
 
 
-# A heading of a notebook page as nbconvert writes it: its id, its HTML, its permalink.
+# A heading of a notebook page: its id, its HTML and its permalink (nbconvert's, with the
+# theme's class).
 _NOTEBOOK_HEADING = re.compile(
-    r'<h([1-6]) id="([^"]+)">(.*?)<a class="anchor-link" href="#\2">¶</a></h\1>', re.DOTALL
+    r'<h([1-6]) id="([^"]+)">(.*?)<a class="headerlink" href="#\2">¶</a></h\1>', re.DOTALL
 )
 
 

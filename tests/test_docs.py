@@ -329,6 +329,29 @@ def test_notebook_maths_after_a_nested_block_is_rendered() -> None:
     assert out.endswith("</div><p>Outside: $1 and $2</p>")
 
 
+def test_notebook_contents_are_read_from_the_rendered_headings() -> None:
+    """A notebook page's contents: one entry per heading, nested by level, each linking to
+    the heading's id and showing its HTML, inline code included."""
+    permalink = '<a class="headerlink" href="#{0}">¶</a>'
+    page = "".join(
+        f'<h{level} id="{anchor}">{title}{permalink.format(anchor)}</h{level}><p>text</p>'
+        for level, anchor, title in [
+            (1, "a-tour", "A tour of <code>jaxlie_geo</code>"),
+            (2, "1-exp-and-log", "1. <code>exp</code> and <code>log</code>"),
+            (3, "11-at-zero", "1.1 At zero"),
+            (2, "2-next", "2. Next"),
+        ]
+    )
+    (top,) = _hooks().notebook_toc(page)
+    assert (top.id, top.title) == ("a-tour", "A tour of <code>jaxlie_geo</code>")
+    first, second = top.children
+    assert (first.url, first.title) == (
+        "#1-exp-and-log",
+        "1. <code>exp</code> and <code>log</code>",
+    )
+    assert [c.id for c in first.children] == ["11-at-zero"] and second.id == "2-next"
+
+
 def test_every_public_module_has_its_own_api_page(site: Path) -> None:
     modules = [n for n, obj in _public().items() if isinstance(obj, types.ModuleType)]
     assert modules, "jaxlie_geo.__all__ lists no module"

@@ -14,8 +14,8 @@ from packaging.utils import canonicalize_name
 
 if sys.version_info >= (3, 11):
     import tomllib
-else:  # Python 3.10: tomllib's origin, which pip vendors
-    from pip._vendor import tomli as tomllib
+else:  # Python 3.10: tomllib's origin (the test extra installs it there)
+    import tomli as tomllib
 
 REPO = Path(__file__).resolve().parents[1]
 PROJECT = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"]
@@ -72,7 +72,8 @@ def _cells(line: str) -> list[str]:
 
 def _extras_table() -> dict[str, tuple[set[str], dict[str, str]]]:
     """``docs/installation.md``'s extras table: for each extra, the extras it includes and
-    the packages it adds, each with the version written after it in parentheses ("")."""
+    the packages it adds, each with the version number written after it in parentheses
+    ("" where none is)."""
     lines = (REPO / "docs" / "installation.md").read_text(encoding="utf-8").splitlines()
     start = lines.index("| extra | includes | adds | for |")
     table = {}
@@ -81,7 +82,7 @@ def _extras_table() -> dict[str, tuple[set[str], dict[str, str]]]:
             break
         extra, includes, adds = _cells(line)[:3]
         (name,) = re.findall(r"`([^`]+)`", extra)
-        packages = re.findall(r"`([^`]+)`(?: \(([^)]*)\))?", adds)
+        packages = re.findall(r"`([^`]+)`(?: \((\d[\d.]*)\))?", adds)
         table[name] = (
             set(re.findall(r"`([^`]+)`", includes)),
             {canonicalize_name(package): version for package, version in packages},
