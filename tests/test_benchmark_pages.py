@@ -1,6 +1,7 @@
 """The figures the README and the guides copy from the results page are blocks that
 ``benchmarks/report.py`` renders from the raw results: an edited figure is found and
-rewritten, an unknown or unused block fails (``test_docs`` runs ``report --check`` itself). Rendering reads JSON and writes Markdown; it compiles nothing."""
+rewritten, an unknown or unused block fails (``test_docs`` runs ``report --check`` itself).
+Rendering reads JSON and writes Markdown; it compiles nothing."""
 
 from __future__ import annotations
 
