@@ -24,7 +24,6 @@ With --save the worst errors replace raw/<machine>/accuracy.json and the results
 Usage:
   python -m benchmarks.accuracy                 # markdown tables (float32, float64, Sim3)
   python -m benchmarks.accuracy --save          # ... saved to raw/<machine>/, page regenerated
-  python -m benchmarks.accuracy --long          # one row per (group, op, dtype, regime)
   python -m benchmarks.accuracy --worst         # also list the worst input of each failing cell
   python -m benchmarks.accuracy --samples 16 --groups SE3 --json out.json
   python -m benchmarks.accuracy --groups Sim3 --no-jaxlie   # Sim3's tables alone
@@ -33,7 +32,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import platform
 import sys
 import time
 
@@ -44,7 +42,7 @@ jax.config.update("jax_enable_x64", True)
 
 from benchmarks import common  # noqa: E402
 from benchmarks import mpref as M  # noqa: E402
-from benchmarks.report import save  # noqa: E402
+from benchmarks.report import accuracy_tables, save  # noqa: E402
 
 OP_TEXT = {"exp": "exp", "log": "log", "jac": "d/dx", "hess": "d²/dx²"}
 REGIME_HEAD = {
@@ -296,7 +294,6 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--groups", default=",".join(M.GROUPS))
     ap.add_argument("--dtypes", default=",".join(M.DTYPES))
-    ap.add_argument("--long", action="store_true", help="one row per (group, op, dtype, regime)")
     ap.add_argument("--worst", action="store_true", help="print the worst input of failing cells")
     ap.add_argument("--no-jaxlie", action="store_true")
     common.add_save_arguments(ap)
@@ -342,52 +339,9 @@ def main() -> int:
     elapsed = time.perf_counter() - t0
 
     names = list(libs)
-    print(
-        f"Worst error in ulp, {' / '.join(names)} "
-        f"(jaxlie_geo {common.version_of('jaxlie_geo')}, jaxlie {common.version_of('jaxlie')}, "
-        f"jax {jax.__version__}, {platform.machine()}, backend {jax.default_backend()} "
-        f"({jax.devices()[0].device_kind}), {args.samples} samples per "
-        f"regime and |v|, {elapsed:.0f} s). Bounds: exp, log {M.BOUNDS['exp']:g}; "
-        f"d/dx {M.BOUNDS['jac']:g}; d²/dx² {M.BOUNDS['hess']:g}; "
-        f"**bold** = a case over its bound.\n"
-    )
-
-    def get(name, g, op, dt, r):
-        v = worst.get((name, g, op, dt, r))
-        return (None, False) if v is None else (v[0], v[3])
-
-    if args.long:
-        head = " | ".join(names)
-        print(f"| group | op | dtype | regime | {head} |")
-        print("|---|---|---|---|" + "---|" * len(names))
-        for g in groups:
-            for op in M.OPS:
-                for dt in dtypes:
-                    for r in M.regimes(g):
-                        if op not in M.OPS_IN_REGIME[r]:
-                            continue
-                        cells = " | ".join(_cell(*get(n, g, op, dt, r)) for n in names)
-                        print(f"| {g} | {OP_TEXT[op]} | {dt} | {M.REGIME_TEXT[r]} | {cells} |")
-    else:
-        for dt in dtypes:
-            print(f"**{dt}** (cells: {' / '.join(names)})\n")
-            print("| group | op | " + " | ".join(REGIME_HEAD[r] for r in M.REGIMES) + " |")
-            print("|---|---|" + "---|" * len(M.REGIMES))
-            for g in groups:
-                for op in M.OPS:
-                    cells = []
-                    for r in M.REGIMES:
-                        if op not in M.OPS_IN_REGIME[r]:
-                            cells.append("")
-                            continue
-                        cells.append(" / ".join(_cell(*get(n, g, op, dt, r)) for n in names))
-                    print(f"| {g} | {OP_TEXT[op]} | " + " | ".join(cells) + " |")
-            print()
-        print(NOTES[0])
-    print(NOTES[1])
 
     sections = []
-    if "Sim3" in groups and not args.long:
+    if "Sim3" in groups:
         sections.append(
             {
                 "title": "Sim(3), joint (θ, σ) regimes (jaxlie_geo)",
@@ -401,10 +355,6 @@ def main() -> int:
                     "lines": sim3_comparison(args.samples, args.seed, sim3_runs),
                 }
             )
-    for sec in sections:
-        print(f"\n**{sec['title']}**\n")
-        print("\n".join(sec["lines"]))
-
     if args.worst:
         print("\nWorst inputs of the cells over the bound:\n")
         for (name, g, op, dt, r), (e, desc, where, over) in worst.items():
@@ -428,6 +378,8 @@ def main() -> int:
         "cells": cells,
         "elapsed_s": elapsed,
     }
+    print("\n".join(accuracy_tables(data)))
+    print(f"{elapsed:.0f} s")
     save("accuracy", data, args)
     return 0
 

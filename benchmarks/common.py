@@ -222,6 +222,23 @@ def fmt_ratio(x: float) -> str:
     return f"{x:.2f}" if x < 10 else f"{x:.1f}" if x < 100 else f"{x:.0f}"
 
 
+def progress_text(r: dict) -> str:
+    """One measured case on one line, as the scripts print it while they run."""
+    ours, ref = r.get("ours_ns_per_elem"), r.get("ref_ns_per_elem")
+    text = f"ours {fmt_ns(ours) if ours is not None else 'not run'}"
+    if ref is not None:
+        text += f", reference {fmt_ns(ref)}"
+    if r.get("ratio") is not None:
+        text += f", speed-up {r['ratio']:.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]"
+    compile_ref = r.get("compile_ref_ms")
+    text += f", compile {r['compile_ours_ms']:.0f}" + (
+        f"/{compile_ref:.0f} ms" if compile_ref is not None else " ms"
+    )
+    if r.get("max_rel_diff") is not None:
+        text += f", max rel diff {r['max_rel_diff']:.1e}"
+    return text
+
+
 def sizes(data: dict) -> list:
     """The batch sizes of a run's results, ascending."""
     return sorted({r["n"] for r in data["results"]})
@@ -239,25 +256,6 @@ def table(header, rows, align) -> list:
         "|" + "|".join("---" if a == "l" else "--:" for a in align) + "|",
     ]
     return out + ["| " + " | ".join(r) + " |" for r in rows]
-
-
-def text_table(header, rows, markdown: bool, left: int = 1) -> str:
-    """A table for the terminal (aligned columns) or, with ``markdown``, as Markdown; the
-    first ``left`` columns are left-aligned, the others right-aligned."""
-    align = ["l" if i < left else "r" for i in range(len(header))]
-    if markdown:
-        esc = lambda cells: [c.replace("|", "\\|") for c in cells]  # "max |diff|"
-        return "\n".join(table(esc(header), [esc(r) for r in rows], align))
-    widths = [max([len(h), *(len(r[i]) for r in rows)]) for i, h in enumerate(header)]
-    line = lambda cells: "  ".join(
-        c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(cells, widths, align)
-    )
-    return "\n".join([line(header), line(["-" * w for w in widths])] + [line(r) for r in rows])
-
-
-# --------------------------------------------------------------------------------------
-# Timing
-# --------------------------------------------------------------------------------------
 
 
 def compile_fn(fn, args):
@@ -417,7 +415,7 @@ def parse_choices(p, text: str, choices, what: str) -> list:
 def parser(description: str, choices: dict, sizes, quick: str, min_repeats: int, sizes_text=None):
     """An argument parser with the options of the timing scripts: ``--sizes``, one option per
     entry of ``choices`` (``{"groups": GROUPS, "ops": OPS}``: ``--groups``, ``--ops``, each a
-    comma-separated subset), ``--repeats``, ``--dtype``, ``--quick``, ``--markdown``,
+    comma-separated subset), ``--repeats``, ``--dtype``, ``--quick``,
     ``--seed`` and the saving options; ``parse`` reads it. ``sizes`` and ``quick`` are the
     default batch sizes of a full and of a ``--quick`` run (``sizes=None``: the script's
     own, which ``sizes_text`` describes)."""
@@ -444,7 +442,6 @@ def parser(description: str, choices: dict, sizes, quick: str, min_repeats: int,
     )
     p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
     p.add_argument("--quick", action="store_true", help=f"sizes {quick}, few repeats (smoke test)")
-    p.add_argument("--markdown", action="store_true", help="print the result tables as markdown")
     p.add_argument("--seed", type=int, default=0)
     add_save_arguments(p)
     return p

@@ -65,8 +65,8 @@ import numpy as np
 from jax.scipy.linalg import expm
 
 from benchmarks import common as C
-from benchmarks.common import fmt_n, fmt_ns
-from benchmarks.report import save
+from benchmarks.common import fmt_n
+from benchmarks.report import extended_table, save
 
 GROUPS = ("Sim3", "SE23")
 OPS = ("exp", "log", "compose", "apply", "jac_right", "grad")
@@ -327,43 +327,6 @@ def global_warmup(geo, dtype):
 # Reporting
 # --------------------------------------------------------------------------------------
 
-HEADER = [
-    "group",
-    "op",
-    "N",
-    "ours /elem",
-    "reference /elem",
-    "speed-up",
-    "speed-up IQR",
-    "compile ours ms",
-    "compile ref ms",
-    "repeats",
-    "max rel diff",
-]
-
-
-def table_rows(results):
-    dash = "–"
-    rows = []
-    for r in results:
-        has_ref = r["ratio"] is not None
-        rows.append(
-            [
-                r["group"],
-                r["op"],
-                fmt_n(r["n"]),
-                fmt_ns(r["ours_ns_per_elem"]),
-                fmt_ns(r["ref_ns_per_elem"]) if has_ref else (r.get("reference_note") or dash),
-                f"{r['ratio']:.2f}" if has_ref else dash,
-                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}" if has_ref else dash,
-                f"{r['compile_ours_ms']:.0f}",
-                dash if r["compile_ref_ms"] is None else f"{r['compile_ref_ms']:.0f}",
-                str(r["repeats"]),
-                dash if r["max_rel_diff"] is None else f"{r['max_rel_diff']:.1e}",
-            ]
-        )
-    return rows
-
 
 def main(argv=None):
     args = parse_args(argv)
@@ -390,25 +353,9 @@ def main(argv=None):
                 r = bench_case(geo, group, op, n, args, dtype, index)
                 index += 1
                 results.append(r)
-                row = table_rows([r])[0]
-                print(
-                    f"{group:4s} {op:9s} N={row[2]:>6s}  ours {row[3]:>9s}/el  "
-                    f"ref {row[4]:>9s}{'/el' if r['ratio'] is not None else '   '}  "
-                    f"speed-up {row[5]:>5s} [{row[6]}]  "
-                    f"compile {row[7]:>5s}/{row[8]:>5s} ms  x{row[9]}  reldiff {row[10]}",
-                    flush=True,
-                )
+                print(f"{group} {op} N={fmt_n(n)}: {C.progress_text(r)}", flush=True)
 
     elapsed = time.perf_counter() - t_start
-    print()
-    print(
-        f"## Results ({args.dtype}; per element = median time per call / N; speed-up = median "
-        "over repetitions of reference time / our time, >1 means ours is faster; IQR of those "
-        "ratios; max rel diff = max |ours - reference| / (1 + |reference|))"
-    )
-    print()
-    print(C.text_table(HEADER, table_rows(results), args.markdown, left=3))
-    print()
     finish(
         results,
         args,
@@ -421,9 +368,11 @@ def main(argv=None):
     return 0
 
 
-def finish(results, args, info, elapsed, stem, label, reference):
-    """Print the cases slower than ``reference`` or disagreeing with it (beyond 1e-3 in
-    float32, 1e-8 in float64), the total time; write --json and --save."""
+def finish(results, args, info, elapsed, stem, label, reference, table=None):
+    """Print the page's table of the run (``table``, the report's function for it), the cases
+    slower than ``reference`` or disagreeing with it (beyond 1e-3 in float32, 1e-8 in
+    float64), the total time; write --json and --save."""
+    table = table or extended_table
     for r in results:
         if r["ratio"] is not None and r["ratio"] < 0.95:
             print(f"slower than {reference}: {label(r)}")
@@ -432,8 +381,10 @@ def finish(results, args, info, elapsed, stem, label, reference):
         if r["max_rel_diff"] is not None and not r["max_rel_diff"] < tol:
             check = f" ({r['check']})" if "check" in r else ""
             print(f"disagreement beyond {tol:g}: {label(r)}: {r['max_rel_diff']:.3g}{check}")
+    data = {"machine": info, "results": results, "elapsed_s": elapsed}
+    print("\n" + "\n".join(table(data)))
     print(f"total benchmark time: {elapsed:.0f} s")
-    save(stem, {"machine": info, "results": results, "elapsed_s": elapsed}, args)
+    save(stem, data, args)
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ Usage:
   python -m benchmarks.jacobians --dtype float64    # float64 (enables jax x64)
   python -m benchmarks.jacobians --quick            # smoke test: N = 10^3, 3 repeats
   python -m benchmarks.jacobians --groups SE3 --cases jac_right_inv,rminus --sizes 1000,100000
-  python -m benchmarks.jacobians --markdown --json out.json
+  python -m benchmarks.jacobians --json out.json
 
 JAX_PLATFORMS is respected (e.g. JAX_PLATFORMS=cuda to run on a GPU). On a 2-core CPU a
 default run takes ~4-6 min and --quick ~2-5 min: most of it is XLA compilation (each case
@@ -66,8 +66,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common as C
-from benchmarks.common import GROUP_INFO, GROUPS, fmt_n, geomean, plain_ns
-from benchmarks.report import save
+from benchmarks.common import GROUP_INFO, GROUPS, fmt_n, plain_ns
+from benchmarks.report import jacobian_table, save
 
 TOL = 1e-9  # float64 agreement threshold
 
@@ -377,106 +377,6 @@ def global_warmup(lib, dtype):
 # Reporting
 # --------------------------------------------------------------------------------------
 
-HEADER = [
-    "group",
-    "Jacobian",
-    "map differentiated by jacfwd (at δ = 0)",
-    "N",
-    "ours ns/elem",
-    "jacfwd ns/elem",
-    "ratio (jacfwd/ours)",
-    "ratio IQR",
-    "max |diff|",
-    "compile ms ours",
-    "compile ms jacfwd",
-]
-N_LEFT = 3  # left-aligned text columns
-
-
-def table_rows(results, markdown):
-    rows = []
-    for r in results:
-        code = (lambda s: f"`{s}`") if markdown else (lambda s: s)
-        rows.append(
-            [
-                r["group"],
-                code(r["jacobian"]),
-                code(r["map"]),
-                fmt_n(r["n"]),
-                plain_ns(r["ours_ns_per_elem"]),
-                plain_ns(r["jacfwd_ns_per_elem"]),
-                f"{r['ratio']:.2f}",
-                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
-                f"{r['max_abs_diff_float64']:.1e}",
-                f"{r['compile_ours_ms']:.0f}",
-                f"{r['compile_jacfwd_ms']:.0f}",
-            ]
-        )
-    return rows
-
-
-def summary(results, skipped, markdown) -> str:
-    bullet = "- " if markdown else "  "
-    lines = []
-    groups = [g for g in GROUPS if any(r["group"] == g for r in results)]
-    if results:
-        parts = [
-            f"{g} {geomean([r['ratio'] for r in results if r['group'] == g]):.2f}" for g in groups
-        ]
-        lines.append(
-            "Geometric-mean ratio jacfwd/ours (>1: closed form faster): "
-            + ", ".join(parts)
-            + f"; overall {geomean([r['ratio'] for r in results]):.2f}."
-        )
-    slow = [r for r in results if r["ratio"] < 0.5]
-    lines.append("")
-    if slow:
-        lines.append("Closed forms slower than 2x jacfwd (ratio < 0.5):")
-        for r in sorted(slow, key=lambda r: r["ratio"]):
-            lines.append(
-                f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
-                f"ratio {r['ratio']:.2f} ({plain_ns(r['ours_ns_per_elem'])} vs "
-                f"{plain_ns(r['jacfwd_ns_per_elem'])} ns/elem)"
-            )
-    else:
-        lines.append("No closed form is slower than 2x jacfwd (ratio < 0.5).")
-    slower = [r for r in results if 0.5 <= r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
-    if slower:
-        lines.append(
-            "Closed forms slower than jacfwd (ratio < 0.95, whole paired-ratio IQR below 1):"
-        )
-        for r in sorted(slower, key=lambda r: r["ratio"]):
-            lines.append(
-                f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: ratio {r['ratio']:.2f}"
-            )
-    bad = [r for r in results if not (r["max_abs_diff_float64"] <= TOL)]
-    lines.append("")
-    if bad:
-        lines.append(f"DISAGREEMENT: closed form and jacfwd differ by more than {TOL:g} (float64):")
-        for r in bad:
-            lines.append(
-                f"{bullet}{r['group']} {r['jacobian']} N={fmt_n(r['n'])}: "
-                f"max |diff| = {r['max_abs_diff_float64']:.3g}"
-            )
-    else:
-        lines.append(
-            f"All closed forms agree with jacfwd to {TOL:g} (float64 check, max abs difference)."
-        )
-    wrong_dtype = [r for r in results if r["output_dtypes"] != [r["dtype"]]]
-    if wrong_dtype:
-        lines.append(
-            "Output dtype differs from the input dtype: "
-            + ", ".join(f"{r['group']} {r['case']} {r['output_dtypes']}" for r in wrong_dtype)
-        )
-    if skipped:
-        lines.append("")
-        lines.append(
-            "Skipped (constant Jacobian, independent of the inputs): "
-            + ", ".join(f"{g} {CASES[c][0]}" for g, c in skipped)
-            + "."
-        )
-    return "\n".join(lines)
-
 
 def main(argv=None):
     args = parse_args(argv)
@@ -520,26 +420,17 @@ def main(argv=None):
                 )
 
     elapsed = time.perf_counter() - t_start
-    print()
-    print(
-        f"## Results ({args.dtype}; per element = median time per call / N; ratio = median over "
-        f"interleaved repetitions of jacfwd time / closed-form time, >1 means the closed form is "
-        f"faster; IQR of those ratios; max |diff| = max abs difference closed form vs jacfwd in "
-        f"float64 on the same inputs)"
-    )
-    print()
-    print(C.text_table(HEADER, table_rows(results, args.markdown), args.markdown, left=N_LEFT))
-    print()
-    print(summary(results, skipped, args.markdown))
-    print()
-    print(f"total benchmark time: {elapsed:.0f} s")
-
     data = {
         "machine": info,
         "results": results,
         "skipped_constant": [{"group": g, "case": c} for g, c in skipped],
         "elapsed_s": elapsed,
     }
+    print("\n" + "\n".join(jacobian_table(data)))
+    bad = [r for r in results if not (r["max_abs_diff_float64"] <= TOL)]
+    for r in bad:
+        print(f"DISAGREEMENT beyond {TOL:g} (float64): {r['group']} {r['jacobian']}")
+    print(f"total benchmark time: {elapsed:.0f} s")
     save(f"jacobians-{args.dtype}", data, args)
     return 0
 

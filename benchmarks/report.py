@@ -249,11 +249,12 @@ def speed_section(raw: dict, order: list) -> list:
         for dtype in ("float32", "float64"):
             data = raw[m].get(f"speed-{dtype}")
             if data is not None:
-                lines += _speed_table(data)
+                lines += speed_table(data)
     return lines
 
 
-def _speed_table(data: dict) -> list:
+def speed_table(data: dict) -> list:
+    """A speed run's section of the page: the table, its notes and the memory table."""
     info, res = data["machine"], data["results"]
     dtype = info.get("dtype", res[0].get("dtype", "?"))
     sizes = sorted({r["n"] for r in res})
@@ -390,11 +391,12 @@ def jacobians_section(raw: dict, order: list) -> list:
         return []
     lines = ["## Jacobians against `jax.jacfwd`", ""]
     for data in found:
-        lines += _jacobian_table(data)
+        lines += jacobian_table(data)
     return lines
 
 
-def _jacobian_table(data: dict) -> list:
+def jacobian_table(data: dict) -> list:
+    """A Jacobian run's section of the page: one table per batch size."""
     info, res = data["machine"], data["results"]
     skipped = {(s["group"], s["case"]) for s in data.get("skipped_constant", [])}
     labels = {r["case"]: r["jacobian"] for r in res}
@@ -492,11 +494,12 @@ def extended_section(raw: dict, order: list) -> list:
         "extended-groups",
         "Sim(3) and SE₂(3) against matrix references",
         EXTENDED_METHOD,
-        _extended_table,
+        extended_table,
     )
 
 
-def _extended_table(data: dict) -> list:
+def extended_table(data: dict) -> list:
+    """A Sim3/SE23 run's section of the page."""
     info, res = data["machine"], data["results"]
     dtype = info.get("dtype", res[0].get("dtype", "?"))
     key = lambda r: (EXTENDED_GROUPS.index(r["group"]), EXTENDED_OPS.index(r["op"]), r["n"])
@@ -607,11 +610,12 @@ def splines_section(raw: dict, order: list) -> list:
         "splines",
         "Cumulative B-splines against autodiff",
         SPLINES_METHOD,
-        _splines_table,
+        splines_table,
     )
 
 
-def _splines_table(data: dict) -> list:
+def splines_table(data: dict) -> list:
+    """A spline run's section of the page."""
     info, res = data["machine"], data["results"]
     dtype = info.get("dtype", res[0].get("dtype", "?"))
     key = lambda r: (SPLINE_BENCHMARKS.index(r["benchmark"]), r["degree"], r["n"])
@@ -868,11 +872,12 @@ def accuracy_section(raw: dict, order: list) -> list:
         return []
     lines = ["## Accuracy", ""]
     for data in found:
-        lines += _accuracy_tables(data)
+        lines += accuracy_tables(data)
     return lines
 
 
-def _accuracy_tables(data: dict) -> list:
+def accuracy_tables(data: dict) -> list:
+    """An accuracy run's section of the page: a grid per dtype, the notes, Sim(3)'s tables."""
     info, libs = data["machine"], data["libs"]
     lines = [
         f"### {label(info)}",

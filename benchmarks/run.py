@@ -3,7 +3,8 @@
 For every group (SO2, SE2, SO3, SE3), every op and every batch size, both
 libraries get a jax.jit-compiled function built from the *same* expression
 (or the native method where jaxlie_geo has one that jaxlie lacks) and the
-*same* input arrays. Timing repetitions are interleaved (A B, then B A, ...)
+*same* input arrays; the tables it prints are the results page's (report.py). Timing
+repetitions are interleaved (A B, then B A, ...)
 so machine noise hits both libraries alike; we report the median time per
 call divided by the batch size (ns/element) and the ratio
 jaxlie / jaxlie_geo (> 1 means jaxlie_geo is faster), together with the
@@ -28,7 +29,7 @@ Usage:
   python -m benchmarks.run --save               # ... saved to raw/<machine>/, page regenerated
   python -m benchmarks.run --dtype float64      # float64 (enables jax x64)
   python -m benchmarks.run --quick              # smoke test, small sizes
-  python -m benchmarks.run --groups SE3 --ops exp,log --sizes 1,1000 --markdown
+  python -m benchmarks.run --groups SE3 --ops exp,log --sizes 1,1000
 """
 
 from __future__ import annotations
@@ -42,8 +43,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common as C
-from benchmarks.common import GROUP_INFO, GROUPS, OPS, fmt_n, fmt_ns, geomean
-from benchmarks.report import memory_rows, save
+from benchmarks.common import GROUP_INFO, GROUPS, OPS, fmt_n, fmt_ns
+from benchmarks.report import save, speed_table
 
 
 def parse_args(argv=None):
@@ -293,103 +294,6 @@ def memory_table(geo, ref, native, n: int, dtype, seed: int) -> list:
     return rows
 
 
-def table_rows(results):
-    rows = []
-    for r in results:
-        rows.append(
-            [
-                r["group"],
-                r["op"],
-                fmt_n(r["n"]),
-                fmt_ns(r["geo_ns_per_elem"]),
-                fmt_ns(r["ref_ns_per_elem"]),
-                f"{r['ratio']:.2f}",
-                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}",
-                f"{r['compile_geo_ms']:.0f}",
-                f"{r['compile_ref_ms']:.0f}",
-            ]
-        )
-    return rows
-
-
-HEADER = [
-    "group",
-    "op",
-    "N",
-    "jaxlie_geo /elem",
-    "jaxlie /elem",
-    "ratio",
-    "ratio IQR",
-    "compile geo ms",
-    "compile jaxlie ms",
-]
-
-
-def summary(results, markdown: bool, eager=None) -> str:
-    lines = []
-    ops = [o for o in OPS if any(r["op"] == o for r in results)]
-    groups = [g for g in GROUPS if any(r["group"] == g for r in results)]
-    sizes = sorted({r["n"] for r in results})
-
-    def row(name, keep):
-        cells = [
-            f"{geomean([r['ratio'] for r in results if keep(r) and r['n'] == n]):.2f}"
-            for n in sizes
-        ]
-        return [name, *cells, f"{geomean([r['ratio'] for r in results if keep(r)]):.2f}"]
-
-    rows = [row(o, lambda r, o=o: r["op"] == o) for o in ops]
-    rows += [row(g, lambda r, g=g: r["group"] == g) for g in groups]
-    rows.append(row("overall", lambda r: True))
-    header = ["op"] + [fmt_n(n) for n in sizes] + ["all"]
-    lines.append(
-        "Geometric-mean ratio jaxlie/jaxlie_geo (>1: jaxlie_geo faster), by op and by group:"
-    )
-    lines.append("")
-    lines.append(C.text_table(header, rows, markdown))
-    # "slower" = median ratio below 0.95 and the whole paired-ratio IQR below 1 (A/A runs with
-    # --candidate jaxlie show ~5% noise on this kind of machine for small batches).
-    slower = [r for r in results if r["ratio"] < 0.95 and r["ratio_q3"] < 1.0]
-    lines.append("")
-    if eager is not None and eager["ratio"] < 0.95 and eager["ratio_q3"] < 1.0:
-        lines.append(
-            f"Eager (no jit) SE3.exp, batch 1: jaxlie_geo is slower, "
-            f"{eager['geo_us']:.1f} µs vs {eager['ref_us']:.1f} µs per call "
-            f"(ratio {eager['ratio']:.3f})."
-        )
-    if slower:
-        lines.append(
-            "Cases where jaxlie_geo is slower (ratio < 0.95 and whole paired-ratio IQR below 1):"
-        )
-        for r in sorted(slower, key=lambda r: r["ratio"]):
-            lines.append(
-                f"  {'- ' if markdown else ''}{r['group']} {r['op']} N={fmt_n(r['n'])}: "
-                f"ratio {r['ratio']:.2f} ({fmt_ns(r['geo_ns_per_elem'])} vs "
-                f"{fmt_ns(r['ref_ns_per_elem'])} per element)"
-            )
-    else:
-        lines.append(
-            "No case where jaxlie_geo is clearly slower "
-            "(ratio < 0.95 with paired-ratio IQR below 1)."
-        )
-    tol = 1e-3 if results and results[0].get("dtype") == "float32" else 1e-8
-    bad = [r for r in results if not (r["max_rel_diff"] < (10 * tol if r["op"] == "grad" else tol))]
-    if bad:
-        lines.append("")
-        lines.append(
-            "Note: outputs disagree between the libraries beyond the dtype's tolerance "
-            "in these cases. Either a library is inaccurate there (see "
-            "benchmarks/accuracy.py) or the two sides compute different things; check "
-            "before trusting the ratio:"
-        )
-        for r in bad:
-            lines.append(
-                f"  {r['group']} {r['op']} N={fmt_n(r['n'])}: "
-                f"max |diff|/(1+|jaxlie|) = {r['max_rel_diff']:.3g}"
-            )
-    return "\n".join(lines)
-
-
 def main(argv=None):
     args = parse_args(argv)
 
@@ -445,51 +349,6 @@ def main(argv=None):
         memory = memory_table(geo, ref, native, int(args.memory_n), dtype, args.seed)
 
     elapsed = time.perf_counter() - t_start
-    print()
-    print(
-        f"## Results ({args.dtype}; per element = median time per call / N; ratio = median "
-        "over repetitions of jaxlie time / jaxlie_geo time, >1 means jaxlie_geo is faster; "
-        "IQR of those ratios)"
-    )
-    print()
-    print(C.text_table(HEADER, table_rows(results), args.markdown, left=3))
-    print()
-    if eager is not None:
-        eager_rows = [
-            [
-                "SE3.exp eager, batch 1",
-                f"{eager['geo_us']:.1f}",
-                f"{eager['ref_us']:.1f}",
-                f"{eager['ratio']:.2f}",
-                f"{eager['ratio_q1']:.2f}–{eager['ratio_q3']:.2f}",
-            ]
-        ]
-        print(
-            C.text_table(
-                ["case", "jaxlie_geo µs/call", "jaxlie µs/call", "ratio", "ratio IQR"],
-                eager_rows,
-                args.markdown,
-            )
-        )
-        print()
-    print(summary(results, args.markdown, eager))
-    print()
-    if memory is not None:
-        print(
-            f"## Memory, SE3 at N = {fmt_n(int(args.memory_n))} ({args.dtype}; MB from XLA's "
-            "buffer assignment: arguments, output, temporaries)"
-        )
-        print()
-        print(
-            C.text_table(
-                ["op", "args", "out", "jaxlie_geo temp", "jaxlie temp"],
-                memory_rows(memory),
-                args.markdown,
-            )
-        )
-        print()
-    print(f"total benchmark time: {elapsed:.0f} s")
-
     data = {
         "machine": info,
         "results": results,
@@ -497,6 +356,8 @@ def main(argv=None):
         "memory": memory,
         "elapsed_s": elapsed,
     }
+    print("\n" + "\n".join(speed_table(data)))
+    print(f"total benchmark time: {elapsed:.0f} s")
     save(f"speed-{args.dtype}", data, args)
     return 0
 

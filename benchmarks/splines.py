@@ -76,8 +76,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common as C
-from benchmarks.common import fmt_n, fmt_ns
+from benchmarks.common import fmt_n
 from benchmarks.extended_groups import finish, max_rel_diff
+from benchmarks.report import splines_table
 
 BENCHMARKS = ("derivatives", "jacobians")
 DEGREES = (3, 5)
@@ -329,45 +330,6 @@ def global_warmup(geo, dtype):
 # Reporting
 # --------------------------------------------------------------------------------------
 
-HEADER = [
-    "benchmark",
-    "degree",
-    "N",
-    "ours /time",
-    "autodiff /time",
-    "speed-up",
-    "speed-up IQR",
-    "compile ours ms",
-    "compile ref ms",
-    "repeats",
-    "max rel diff",
-]
-
-
-def table_rows(results):
-    dash = "–"
-    rows = []
-    for r in results:
-        has_ref = r["ratio"] is not None
-        ours = r["ours_ns_per_elem"]
-        ref = r["ref_ns_per_elem"]
-        rows.append(
-            [
-                r["benchmark"],
-                str(r["degree"]),
-                fmt_n(r["n"]),
-                fmt_ns(ours) if ours is not None else "not run",
-                fmt_ns(ref) if ref is not None else "not run",
-                f"{r['ratio']:.2f}" if has_ref else dash,
-                f"{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}" if has_ref else dash,
-                f"{r['compile_ours_ms']:.0f}",
-                f"{r['compile_ref_ms']:.0f}",
-                str(r["repeats"]),
-                dash if r["max_rel_diff"] is None else f"{r['max_rel_diff']:.1e}",
-            ]
-        )
-    return rows
-
 
 def main(argv=None):
     args = parse_args(argv)
@@ -395,35 +357,9 @@ def main(argv=None):
                 r = bench_case(geo, benchmark, degree, n, args, dtype, index)
                 index += 1
                 results.append(r)
-                row = table_rows([r])[0]
-                notes = "; ".join(
-                    f"{side}: {r[key]}"
-                    for side, key in (("ours", "ours_note"), ("autodiff", "reference_note"))
-                    if r[key]
-                )
-                print(
-                    f"{benchmark:11s} degree {degree} N={row[2]:>6s}  ours {row[3]:>9s}  "
-                    f"autodiff {row[4]:>9s}  speed-up {row[5]:>5s} [{row[6]}]  "
-                    f"compile {row[7]:>5s}/{row[8]:>5s} ms  x{row[9]}  reldiff {row[10]}"
-                    + (f"  ({notes})" if notes else ""),
-                    flush=True,
-                )
+                print(f"{benchmark} degree {degree} N={fmt_n(n)}: {C.progress_text(r)}", flush=True)
 
     elapsed = time.perf_counter() - t_start
-    print()
-    print(
-        f"## Results ({GROUP}, {NUM_CONTROL_POINTS} control points, {args.dtype}; per time = "
-        "median time per call / N; speed-up = median over repetitions of autodiff time / our "
-        "time, >1 means ours is faster; IQR of those ratios; max rel diff = "
-        "max |ours - autodiff| / (1 + |autodiff|))"
-    )
-    print()
-    print(C.text_table(HEADER, table_rows(results), args.markdown, left=3))
-    print()
-    for r in results:
-        for side, key in (("ours", "ours_note"), ("autodiff", "reference_note")):
-            if r[key]:
-                print(f"{r['benchmark']} degree {r['degree']} N={fmt_n(r['n'])}, {side}: {r[key]}")
     finish(
         results,
         args,
@@ -432,6 +368,7 @@ def main(argv=None):
         f"splines-{args.dtype}",
         lambda r: f"{r['benchmark']} degree {r['degree']} N={fmt_n(r['n'])}",
         "autodiff",
+        splines_table,
     )
     return 0
 
