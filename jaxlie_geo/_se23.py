@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import MatrixLieGroup, block_matrix
+from ._base import MatrixLieGroup
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
 from ._pytree import pytree_dataclass
 from ._scalar import dot, sq_norm
@@ -30,7 +30,15 @@ from ._so3 import (
     rodrigues_entries,
     skew,
 )
-from ._xla import aligned, from_block_entries, materialize_columns, matmul, matmul_unrolled
+from ._xla import (
+    Schedule,
+    aligned,
+    block_matrix,
+    from_block_entries,
+    materialize_columns,
+    matmul,
+    matmul_unrolled,
+)
 
 
 @pytree_dataclass
@@ -55,8 +63,7 @@ class SE23(MatrixLieGroup):
     parameters_dim = 10
     tangent_dim = 9
     space_dim = 3
-    _kernels_reread = True
-    _interpolate_in_memory = True
+    _schedule = Schedule(reread=True, interpolate_in_memory=True)
 
     # -- construction and accessors -------------------------------------------------
 
@@ -289,7 +296,7 @@ class SE23(MatrixLieGroup):
     @override
     def multiply(self, other: SE23) -> SE23:
         """(R₁R₂, R₁p₂ + p₁, R₁v₂ + v₁)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R = a.rotation()
         return SE23(
             jnp.concatenate(
@@ -305,7 +312,7 @@ class SE23(MatrixLieGroup):
     def _between(self, other: SE23) -> SE23:
         """``self⁻¹ @ other`` = (R₁⁻¹R₂, R₁⁻¹(p₂ − p₁), R₁⁻¹(v₂ − v₁)): nearby positions
         and velocities subtract exactly (as ``SE3``'s)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R_inv = a.rotation().inverse()
         return SE23(
             jnp.concatenate(
@@ -321,7 +328,7 @@ class SE23(MatrixLieGroup):
     @override
     def inverse(self) -> SE23:
         """(R⁻¹, −R⁻¹p, −R⁻¹v)."""
-        T = self._in_memory(self)
+        T = self._schedule.inputs(self)
         R_inv = T.rotation().inverse()
         return SE23(
             jnp.concatenate(

@@ -16,7 +16,7 @@ from typing_extensions import override
 
 from . import _scalar, hints
 from ._alignment import umeyama_parts
-from ._base import MatrixLieGroup, block_matrix
+from ._base import MatrixLieGroup
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
 from ._pytree import pytree_dataclass
 from ._scalar import components, dot, pow2_inverse, sq_norm
@@ -30,7 +30,7 @@ from ._so3 import (
     log_quaternion_parts,
     skew,
 )
-from ._xla import aligned, materialize_columns, matmul
+from ._xla import Schedule, aligned, block_matrix, materialize_columns, matmul
 
 
 def _eye3(like: jax.Array) -> jax.Array:
@@ -99,8 +99,7 @@ class Sim3(MatrixLieGroup):
     parameters_dim = 8
     tangent_dim = 7
     space_dim = 3
-    _kernels_reread = True
-    _interpolate_in_memory = True
+    _schedule = Schedule(reread=True, interpolate_in_memory=True)
 
     # -- construction and accessors -------------------------------------------------
 
@@ -392,13 +391,13 @@ class Sim3(MatrixLieGroup):
     @override
     def apply(self, target: hints.Array) -> jax.Array:
         """Points x ↦ s R x + t, ``(*batch, 3)``."""
-        T, p = self._in_memory(*aligned(self, self._check_points(target)))
+        T, p = self._schedule.inputs(*aligned(self, self._check_points(target)))
         return T.scale()[..., None] * T.rotation()._apply_kernel(p) + T.translation()
 
     @override
     def multiply(self, other: Sim3) -> Sim3:
         """(R₁R₂, s₁R₁t₂ + t₁, σ₁ + σ₂)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R = a.rotation()
         t = a.scale()[..., None] * R._apply_kernel(b.translation()) + a.translation()
         return Sim3(
@@ -414,7 +413,7 @@ class Sim3(MatrixLieGroup):
 
     def _between(self, other: Sim3) -> Sim3:
         """``self⁻¹ @ other`` = (R₁⁻¹R₂, s₁⁻¹R₁⁻¹(t₂ − t₁), σ₂ − σ₁)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R_inv = a.rotation().inverse()
         t = jnp.exp(-a.log_scale())[..., None] * R_inv._apply_kernel(
             b.translation() - a.translation()
@@ -433,7 +432,7 @@ class Sim3(MatrixLieGroup):
     @override
     def inverse(self) -> Sim3:
         """(R⁻¹, −s⁻¹R⁻¹t, −σ)."""
-        T = self._in_memory(self)
+        T = self._schedule.inputs(self)
         R_inv = T.rotation().inverse()
         t = -jnp.exp(-T.log_scale())[..., None] * R_inv._apply_kernel(T.translation())
         return Sim3(jnp.concatenate([R_inv.wxyz, t, -T.log_scale()[..., None]], axis=-1))
