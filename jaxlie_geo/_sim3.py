@@ -2,7 +2,7 @@
 
 The exponential's translation integrates e^{τ(ω̂ + σI)} over τ ∈ [0, 1]; its coefficients
 are joint functions of the rotation angle θ and the log-scale σ, evaluated by
-``_scalar.sim3_coefficients`` without the cancellation of the textbook closed forms as
+``_scalar_sim3.sim3_coefficients`` without the cancellation of the textbook closed forms as
 θ and σ go to 0 together.
 """
 
@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 from typing_extensions import override
 
-from . import _scalar, hints
+from . import _scalar, _scalar_sim3, hints
 from ._alignment import umeyama_parts
 from ._base import MatrixLieGroup
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
@@ -187,7 +187,7 @@ class Sim3(MatrixLieGroup):
     def exp(cls, tangent: hints.Array) -> Sim3:
         """Exponential map of (v, ω, σ): q = exp_SO3(ω), log-scale σ (exactly), and
         t = W v with W = ∫₀¹ e^{τ(ω̂ + σI)} dτ = D0 I + B ω̂ + C ωωᵀ, the coefficients
-        from ``_scalar.sim3_coefficients`` (accurate jointly in θ and σ).
+        from ``_scalar_sim3.sim3_coefficients`` (accurate jointly in θ and σ).
 
         Args:
             tangent: ``(*batch, 7)``.
@@ -199,7 +199,7 @@ class Sim3(MatrixLieGroup):
         xi = cls._check_tangent(tangent)
         v, w, sigma = xi[..., :3], xi[..., 3:6], xi[..., 6]
         half = exp_half_angle(w)
-        coeffs = _scalar.sim3_coefficients(sigma, sq_norm(w), half)
+        coeffs = _scalar_sim3.sim3_coefficients(sigma, sq_norm(w), half)
         t = _w_apply(coeffs, w, v)
         return Sim3(jnp.concatenate([exp_quaternion(w, half), t, sigma[..., None]], axis=-1))
 
@@ -214,7 +214,7 @@ class Sim3(MatrixLieGroup):
         # cos(θ/2) = |q_w|/‖q‖ and sin(θ/2)/(θ/2) = 2/(s‖q‖), read off the quaternion
         norm = jnp.sqrt(sq_norm(q))
         half = (jnp.abs(q[..., 0]) / norm, 2.0 / (s * norm))
-        coeffs = _scalar.sim3_coefficients(sigma, sq_norm(w), half)
+        coeffs = _scalar_sim3.sim3_coefficients(sigma, sq_norm(w), half)
         v = _w_inverse_apply(coeffs, u, self.translation(), s)
         return jnp.concatenate([v, w, sigma[..., None]], axis=-1)
 
@@ -272,7 +272,7 @@ class Sim3(MatrixLieGroup):
             ∂t/∂σ = D0_σ v + B_σ ω×v + C_σ (ω·v) ω,
             ∂t/∂ω = 2 (D0_x v + B_x ω×v + C_x (ω·v) ω) ωᵀ − B v̂ + C (ω vᵀ + (ω·v) I),
 
-        and every coefficient is a member of ``_scalar.sim3_family``, in closed form:
+        and every coefficient is a member of ``_scalar_sim3.sim3_family``, in closed form:
         (D0, B, C)_σ = T_{1,0}, T_{1,1}, T_{1,2}; 2 D0_x = −T_{1,1}, 2 B_x = T_{0,3} − T_{1,2},
         2 C_x = 2T_{0,4} − T_{1,3}."""
         v, w, sigma = xi[..., :3], xi[..., 3:6], xi[..., 6]
@@ -280,7 +280,7 @@ class Sim3(MatrixLieGroup):
         q = exp_quaternion(w)
         # Computed once into one array: fused, each is recomputed per entry that reads it.
         a, d0, b, c, _, d1_0, d1_1, d1_2, d0_3, d1_3, d0_4, q0, q1, q2, q3 = materialize_columns(
-            *_scalar.sim3_family(sigma, x, _scalar.COEFFICIENTS_AND_DERIVATIVES),
+            *_scalar_sim3.sim3_family(sigma, x, _scalar_sim3.COEFFICIENTS_AND_DERIVATIVES),
             *components(q),
         )
         coeffs = (a, d0, b, c)
