@@ -46,15 +46,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from typing import Dict, List, Literal, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union, get_args
 
 import numpy as onp
 
+from .. import hints
 from ._graph import POSE_WIDTH, TANGENT_DIM, PoseGraph
 
 PathLike = Union[str, "os.PathLike[str]"]
-InformationOrder = Literal["g2o", "toro"]
-FileFormat = Literal["g2o", "toro"]
+_FORMATS = get_args(hints.PoseGraphFormat)
 
 #: |‖q‖ − 1| above which a g2o quaternion is rejected (files store about 6 digits).
 QUATERNION_NORM_TOLERANCE = 1e-3
@@ -64,7 +64,7 @@ QUATERNION_NORM_TOLERANCE = 1e-3
 class _Tag:
     name: str
     dim: int
-    format: str  # "g2o" or "toro"
+    format: hints.PoseGraphFormat
     is_edge: bool
     numbers: int  # tokens after the tag, ids included
 
@@ -93,7 +93,7 @@ _NAMES = {"g2o": "g2o", "toro": "TORO"}
 _IGNORED = {"EQUIV": (2, 2), "FIX": (1, None)}
 
 
-def _upper_triangle(k: int, order: str) -> Tuple[onp.ndarray, onp.ndarray]:
+def _upper_triangle(k: int, order: hints.PoseGraphFormat) -> Tuple[onp.ndarray, onp.ndarray]:
     """Row and column of each stored information entry, in the file's order."""
     if k == 3 and order == "toro":  # xx, xy, yy, θθ, xθ, yθ
         return onp.array([0, 0, 1, 2, 0, 1]), onp.array([0, 1, 1, 2, 2, 2])
@@ -229,13 +229,13 @@ def _pose_values(records: _Records, start: int) -> onp.ndarray:
     return onp.concatenate([xyz, rpy_to_quaternion(rpy)], axis=1)
 
 
-def _information(records: _Records, order: str) -> onp.ndarray:
+def _information(records: _Records, order: hints.PoseGraphFormat) -> onp.ndarray:
     """The information matrices ``(n, k, k)``, the entries read in ``order``."""
     k = TANGENT_DIM[records.tag.dim]
     return _fill(records.values[:, -(k * (k + 1) // 2) :], k, order)
 
 
-def _fill(entries: onp.ndarray, k: int, order: str) -> onp.ndarray:
+def _fill(entries: onp.ndarray, k: int, order: hints.PoseGraphFormat) -> onp.ndarray:
     """``(n, k(k+1)/2)`` upper-triangle entries in the file's order to ``(n, k, k)``."""
     rows, cols = _upper_triangle(k, order)
     out = onp.zeros((len(entries), k, k))
@@ -252,7 +252,7 @@ def _is_positive_definite(m: onp.ndarray) -> bool:
     return True
 
 
-def _check_information(records: _Records, order: str) -> onp.ndarray:
+def _check_information(records: _Records, order: hints.PoseGraphFormat) -> onp.ndarray:
     """The information matrices, else an error at the first one that is not positive
     definite (suggesting the other 2D order where it would give one)."""
     info = _information(records, order)
@@ -398,7 +398,7 @@ def _chain(
 # The public functions.
 
 
-def read(path: PathLike, *, information_order: Optional[InformationOrder] = None) -> PoseGraph:
+def read(path: PathLike, *, information_order: Optional[hints.PoseGraphFormat] = None) -> PoseGraph:
     """Read a pose graph from a g2o or TORO file, 2D or 3D, the format told by the tags.
 
     The records and conventions are those of this module's description: Zᵢⱼ is the pose
@@ -444,7 +444,7 @@ def read(path: PathLike, *, information_order: Optional[InformationOrder] = None
             ``"{path}: "``: a file without edges. Also where ``information_order`` is
             not None, ``"g2o"`` or ``"toro"``.
     """
-    if information_order not in (None, "g2o", "toro"):
+    if information_order is not None and information_order not in _FORMATS:
         raise ValueError(
             f"read: information_order must be None, 'g2o' or 'toro', got {information_order!r}"
         )
@@ -557,7 +557,7 @@ def _tag_at(groups: Dict[str, Tuple[List[int], List[str]]], line: int) -> str:
     return "?"
 
 
-def write(path: PathLike, graph: PoseGraph, *, format: FileFormat = "g2o") -> None:
+def write(path: PathLike, graph: PoseGraph, *, format: hints.PoseGraphFormat = "g2o") -> None:
     """Write a pose graph as a g2o or TORO file: the vertex records, then the edges.
 
     The records and conventions are those of this module's description; ``read`` reads the
@@ -580,7 +580,7 @@ def write(path: PathLike, graph: PoseGraph, *, format: FileFormat = "g2o") -> No
         ValueError: where ``format`` is neither, an information matrix is not exactly
             symmetric, or a value is not finite (the file could not be read back).
     """
-    if format not in ("g2o", "toro"):
+    if format not in _FORMATS:
         raise ValueError(f"write: format must be 'g2o' or 'toro', got {format!r}")
     info = onp.asarray(graph.information, dtype=onp.float64)
     if not onp.array_equal(info, onp.swapaxes(info, -1, -2)):

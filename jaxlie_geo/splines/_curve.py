@@ -270,7 +270,7 @@ class Spline(Generic[GroupT]):
         """The element at times ``t``, batch ``S``."""
         return _evaluate(self, self.locate(t), 0).value
 
-    def velocity(self, t: Union[hints.Array, SplineTime], frame: str = "body") -> jax.Array:
+    def velocity(self, t: Union[hints.Array, SplineTime], frame: hints.Frame = "body") -> jax.Array:
         """Velocity at ``t``, ``(*S, tangent_dim)``: in the body frame (default) ω with
         ``T⁻¹ Ṫ = hat(ω)``; in the world frame (``frame="world"``) ``Ad(T) ω``, with
         ``Ṫ T⁻¹ = hat(Ad(T) ω)``. For SE(3) with body velocity (v, ω_b) the world
@@ -278,14 +278,16 @@ class Spline(Generic[GroupT]):
         ev = _evaluate(self, self.locate(t), 1)
         return _in_frame(ev, ev.velocity, frame)
 
-    def acceleration(self, t: Union[hints.Array, SplineTime], frame: str = "body") -> jax.Array:
+    def acceleration(
+        self, t: Union[hints.Array, SplineTime], frame: hints.Frame = "body"
+    ) -> jax.Array:
         """dω/dt at ``t`` (ω the body velocity), ``(*S, tangent_dim)``. In the world frame,
         the derivative of the world velocity: ``d/dt (Ad(T) ω) = Ad(T) dω/dt``. For SE(3)
         the position's acceleration is p̈ = R (v̇ + ω × v)."""
         ev = _evaluate(self, self.locate(t), 2)
         return _in_frame(ev, ev.acceleration, frame)
 
-    def jerk(self, t: Union[hints.Array, SplineTime], frame: str = "body") -> jax.Array:
+    def jerk(self, t: Union[hints.Array, SplineTime], frame: hints.Frame = "body") -> jax.Array:
         """d²ω/dt² at ``t``, ``(*S, tangent_dim)``; zero for degree < 3 inside a segment.
         In the world frame ``Ad(T)(ω̈ + [ω, ω̇])``, the second derivative of the world
         velocity."""
@@ -315,7 +317,7 @@ def _is_int(x: Any) -> bool:
     return isinstance(x, (int, onp.integer)) and not isinstance(x, bool)
 
 
-def _in_frame(ev: SplineEvaluation, x: jax.Array, frame: str) -> jax.Array:
+def _in_frame(ev: SplineEvaluation, x: jax.Array, frame: hints.Frame) -> jax.Array:
     if frame == "body":
         return x
     if frame == "world":

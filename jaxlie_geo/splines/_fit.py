@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Literal, Optional, Tuple, Union
+from typing import Any, Optional, Tuple, Union
 
 import jax
 import jax.numpy as jnp
@@ -78,10 +78,8 @@ def fit(
     t0: Optional[Union[int, float]] = None,
     weights: Optional[hints.Array] = None,
     initial: Optional[Spline[GroupT]] = None,
-    method: Literal["lm", "gn"] = "lm",
-    linear_solver: Literal[
-        "auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg"
-    ] = "auto",
+    method: hints.SolverMethod = "lm",
+    linear_solver: hints.LinearSolver = "auto",
     max_iterations: int = 50,
     tolerance: float = 1e-12,
     initial_damping: float = 1e-6,
