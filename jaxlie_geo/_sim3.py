@@ -18,6 +18,7 @@ from . import _scalar, _scalar_sim3, hints
 from ._alignment import umeyama_parts
 from ._base import MatrixLieGroup
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
+from ._jit import deprecated_alias
 from ._pytree import pytree_dataclass
 from ._scalar import components, dot, pow2_inverse, sq_norm
 from ._so3 import (
@@ -104,7 +105,7 @@ class Sim3(MatrixLieGroup):
     # -- construction and accessors -------------------------------------------------
 
     @classmethod
-    def from_rotation_translation_scale(
+    def from_rotation_translation_and_scale(
         cls, rotation: SO3, translation: hints.Array, scale: hints.Array
     ) -> Sim3:
         """The similarity x ↦ s R x + t; batch axes of the three broadcast.
@@ -115,12 +116,16 @@ class Sim3(MatrixLieGroup):
             scale: s, shape ``batch`` (a scalar for one element). Stored as log s: s ≤ 0
                 gives a log-scale of NaN (s < 0) or −inf (s = 0), which ``is_valid`` reports.
         """
-        where = "Sim3.from_rotation_translation_scale"
+        where = "Sim3.from_rotation_translation_and_scale"
         check_type(where, "rotation", rotation, SO3)
         r = rotation.parameters()
         t = as_float_array(translation, "translation", (3,), where, like=r)
         s = as_float_array(scale, "scale", (), where, like=r)
         return cls._assemble(where, r, t, jnp.log(s))
+
+    from_rotation_translation_scale = deprecated_alias(
+        "from_rotation_translation_scale", "from_rotation_translation_and_scale", on_class=True
+    )
 
     @classmethod
     def _assemble(cls, where: str, r: jax.Array, t: jax.Array, log_s: jax.Array) -> Sim3:
@@ -494,4 +499,4 @@ class Sim3(MatrixLieGroup):
                 of the shapes above.
         """
         r, t, s = umeyama_parts(source, target, weights, True, "Sim3.align")
-        return cls.from_rotation_translation_scale(SO3.from_matrix(r), t, s)
+        return cls.from_rotation_translation_and_scale(SO3.from_matrix(r), t, s)
