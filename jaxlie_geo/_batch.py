@@ -5,7 +5,7 @@ elementwise function over a large batch in chunks, on CPU, to bound its temporar
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence, Tuple, TypeVar
+from typing import Any, Callable, Sequence, Tuple, TypeVar, cast
 
 import jax
 import jax.numpy as jnp
@@ -152,10 +152,12 @@ def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
     elements = list(elements)
     if not elements:
         raise ValueError("stack: need at least one element.")
-    G = type(elements[0])
+    first: Any = elements[0]
+    G = type(first)
     if any(type(e) is not G for e in elements):
         raise TypeError("stack: all elements must be of the same group.")
-    ndim = len(elements[0].get_batch_axes()) + 1
+    ndim = len(first.get_batch_axes()) + 1
     if not -ndim <= axis < ndim:
         raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
-    return G(jnp.stack([e.parameters() for e in elements], axis=axis % ndim))
+    params = [cast(Any, e).parameters() for e in elements]
+    return cast(GroupT, G(jnp.stack(params, axis=axis % ndim)))

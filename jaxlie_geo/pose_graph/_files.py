@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from typing import Dict, List, Optional, Sequence, Tuple, Union, get_args
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast, get_args
 
 import numpy as onp
 
@@ -268,7 +268,7 @@ def _check_information(records: _Records, order: hints.PoseGraphFormat) -> onp.n
         f"symmetric positive definite: {info[row].tolist()}"
     )
     if tag.dim == 2:
-        other = "toro" if order == "g2o" else "g2o"
+        other: hints.PoseGraphFormat = "toro" if order == "g2o" else "g2o"
         if _is_positive_definite(_information(records, other)[row]):
             message += (
                 f"; read in {_NAMES[other]} order it is: pass information_order={other!r}"
@@ -298,8 +298,8 @@ def rpy_to_quaternion(rpy: onp.ndarray) -> onp.ndarray:
     flat = rpy.reshape(-1, 3)
     a = _padded(flat, [0.0, 0.0, 0.0])
     with x64(True):
-        q = SO3.from_rpy_radians(a[:, 0], a[:, 1], a[:, 2]).as_quaternion_xyzw()
-        q = onp.asarray(q, dtype=onp.float64)
+        R = SO3.from_rpy_radians(a[:, 0], a[:, 1], a[:, 2])
+        q = onp.asarray(R.as_quaternion_xyzw(), dtype=onp.float64)
     return q[: len(flat)].reshape(*rpy.shape[:-1], 4)
 
 
@@ -363,7 +363,7 @@ def _chain(
     ancestor = onp.concatenate([parent, onp.full(m - n, -1)])
     with x64(True):
         Z = to_group(dim, _padded(z[onp.maximum(edge, 0)], identity))
-        G = type(Z)
+        G: Any = type(Z)
         step = onp.where(
             _padded(backwards[:, None].astype(float), [0.0]) > 0,
             onp.asarray(Z.inverse().parameters()),
@@ -470,7 +470,10 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
             raise _Error(
                 int(records.lines[row]), f"{name}: an edge from vertex {ij[row, 0]} to itself"
             )
-        order = information_order if (information_order and dim == 2) else tag.format
+        order = cast(
+            hints.PoseGraphFormat,
+            information_order if (information_order and dim == 2) else tag.format,
+        )
         information = _check_information(records, order)
         edges.append((records.lines, ij, _pose_values(records, 2), information))
     if not edges:
