@@ -231,12 +231,12 @@ def _sci(x: float) -> str:
 
 def coefficient_lines() -> list:
     """Markdown lines: B and C (W = A I + B ω̂ + C ω̂²) at θ = |σ| = r from mpmath, and the
-    relative errors of jaxlie_geo's ``_scalar.sim3_coefficients`` and of the textbook closed
+    relative errors of jaxlie_geo's ``_scalar_sim3.sim3_coefficients`` and of the textbook closed
     form there."""
     import jax.numpy as jnp
     import mpmath as mp
 
-    from jaxlie_geo import _scalar
+    from jaxlie_geo import _scalar_sim3
 
     rows = [("float64", 1e-5), ("float64", 1e-6), ("float32", 1e-3), ("float32", 1e-4)]
     lines = [
@@ -249,7 +249,7 @@ def coefficient_lines() -> list:
             with mp.workdps(M.DPS):
                 _, _, b_ref, c_ref = M.sim3_coefficients(mp.mpf(float(sg)), mp.mpf(float(th)))
             with M.x64_for(dt):
-                _, _, b_ours, c_ours = _scalar.sim3_coefficients(
+                _, _, b_ours, c_ours = _scalar_sim3.sim3_coefficients(
                     jnp.asarray(sg), jnp.asarray(th) * jnp.asarray(th)
                 )
             _, b_cf, c_cf = textbook_sim3_coefficients(sg, th, dt)

@@ -248,8 +248,8 @@ def noise_jacobian(omega: jax.Array, acc: jax.Array, dt: jax.Array, exact: bool 
 
 def time_shift(X: SE23, dt: jax.Array) -> SE23:
     """Φ_dt(R, p, v) = (R, p + v dt, v)."""
-    return SE23.from_rotation_position_velocity(
-        X.rotation(), X.position() + dt * X.velocity(), X.velocity()
+    return SE23.from_rotation_translation_and_velocity(
+        X.rotation(), X.translation() + dt * X.velocity(), X.velocity()
     )
 
 
@@ -328,7 +328,7 @@ def predict(X_i: SE23, delta: SE23, dt_ij: jax.Array, gravity: jax.Array) -> SE2
     dt = jnp.asarray(dt_ij)[..., None]
     gravity = jnp.broadcast_to(jnp.asarray(gravity, delta.parameters().dtype), (3,))
     rot = SO3.identity(dtype=delta.parameters().dtype)
-    fall = SE23.from_rotation_position_velocity(rot, 0.5 * gravity * dt**2, gravity * dt)
+    fall = SE23.from_rotation_translation_and_velocity(rot, 0.5 * gravity * dt**2, gravity * dt)
     return fall @ time_shift(X_i, dt) @ delta
 
 

@@ -59,7 +59,7 @@ POSITION_NOISE = 0.02  # noise of the reported positions [m, in the true unit]
 # The estimate's frame, ``p = TRUE_FRAME @ p̂`` before the drift: where its origin lies, how
 # it is turned, and its unit of length (one estimated unit is 2.5 m).
 FRAME_UNIT = 2.5
-TRUE_FRAME = Sim3.from_rotation_translation_scale(
+TRUE_FRAME = Sim3.from_rotation_translation_and_scale(
     SO3.from_rpy_radians(0.15, -0.1, 0.8), jnp.asarray([-4.0, 3.0, 1.0]), FRAME_UNIT
 )
 

@@ -20,7 +20,7 @@ from . import utils as utils
 from ._base import MatrixLieGroup as MatrixLieGroup
 from ._base import SEBase as SEBase
 from ._base import SOBase as SOBase
-from ._base import stack as stack
+from ._batch import stack as stack
 from ._geodesic import Geodesic as Geodesic
 from ._geodesic import between as between
 from ._geodesic import geodesic as geodesic

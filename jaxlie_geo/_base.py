@@ -44,7 +44,7 @@ import numpy as onp
 from typing_extensions import Self, final
 
 from . import hints
-from ._batch import in_chunks
+from ._batch import pairwise_in_chunks
 from ._checks import (
     as_float_array,
     check_batches,
@@ -55,7 +55,7 @@ from ._checks import (
 )
 from ._jit import jit_public_methods
 from ._scalar import components
-from ._xla import aligned, materialize, matmul_unrolled
+from ._xla import Schedule, aligned, materialize, matmul_unrolled
 
 
 class MatrixLieGroup(abc.ABC):
@@ -75,17 +75,8 @@ class MatrixLieGroup(abc.ABC):
     """Dimension k of the tangent space (the Lie algebra)."""
     space_dim: ClassVar[int]
     """Dimension of the points the group acts on."""
-    # Scheduling, never values (docs/design/memory-and-chunks.md has the measurements).
-    _kernels_reread: ClassVar[bool] = False
-    """Whether the group's kernels read each input component several times (the quaternion
-    groups: a Hamilton product reads each of 8 components 4 times), so that ``multiply``,
-    ``apply``, ``inverse`` and ``interpolate`` compute their inputs into memory first
-    (``_in_memory``)."""
-    _interpolate_in_memory: ClassVar[bool] = False
-    """Whether ``interpolate`` also computes its relative element, log and exp into memory
-    before the next kernel reads them."""
-    _interpolate_in_chunks: ClassVar[bool] = False
-    """Whether large ``interpolate`` batches run in chunks on CPU (``_batch.in_chunks``)."""
+    _schedule: ClassVar[Schedule] = Schedule()
+    """How XLA schedules the group's kernels, never their values (``_xla.Schedule``)."""
 
     # -- construction ---------------------------------------------------------------
 
@@ -353,18 +344,10 @@ class MatrixLieGroup(abc.ABC):
         Large batches of one shape run in chunks on CPU, which bounds the temporaries
         (``docs/design/memory-and-chunks.md``); the values are the same.
         """
-        t = jnp.asarray(t)  # lists and tuples too, as in geodesic
-        batch = self.get_batch_axes()
-        same = type(other) is type(self) and other.get_batch_axes() == batch
-        t_shape = jnp.shape(t)
-        t_fits = len(t_shape) <= len(batch) and all(
-            a in (1, b) for a, b in zip(t_shape[::-1], batch[::-1])
-        )
-        if self._interpolate_in_chunks and same and t_fits:
-            like = jnp.zeros((), jnp.result_type(self.parameters(), other.parameters()))
-            t = as_float_array(t, "t", (), f"{type(self).__name__} geodesic", like=like)
-            return in_chunks(_interpolate, batch, self, other, jnp.broadcast_to(t, batch))
-        return _interpolate(self, other, t)
+        if self._schedule.interpolate_in_chunks:
+            where = f"{type(self).__name__} geodesic"
+            return pairwise_in_chunks(_interpolate, self, other, t, where)
+        return _interpolate(self, other, jnp.asarray(t))
 
     def _along(self, tangent: jax.Array, t: hints.Scalar) -> Self:
         """``self @ exp(t · tangent)``, the geodesic through ``self`` with body velocity
@@ -374,23 +357,8 @@ class MatrixLieGroup(abc.ABC):
         t = as_float_array(t, "t", (), where, like=tangent)
         batch = check_batches(where, "batch axes of the path and of t", tangent.shape[:-1], t.shape)
         t = jnp.broadcast_to(t.astype(jnp.result_type(t, tangent)), batch)
-        t, tangent = aligned(t[..., None], self._in_memory_along(tangent))
-        return self.multiply(self._in_memory_along(G.exp(t * tangent)))
-
-    def _in_memory_along(self, x: Any) -> Any:
-        """``x`` computed into memory inside ``interpolate`` and geodesics, where the group
-        sets ``_interpolate_in_memory``."""
-        return materialize(x) if self._interpolate_in_memory else x
-
-    def _in_memory(self, *xs: Any) -> Any:
-        """The inputs computed once into memory (``_xla.materialize``) where the group sets
-        ``_kernels_reread``, else as they are; one value for one input, else a tuple.
-        Without the barrier XLA:CPU fuses a producer into every read of it: an exp's sincos
-        is recomputed per read, and a chain of K compositions grows as 4^K
-        (docs/design/memory-and-chunks.md)."""
-        if self._kernels_reread:
-            return materialize(*xs)
-        return xs[0] if len(xs) == 1 else xs
+        t, tangent = aligned(t[..., None], self._schedule.along(tangent))
+        return self.multiply(self._schedule.along(G.exp(t * tangent)))
 
     # -- batch handling -------------------------------------------------------------
 
@@ -538,11 +506,11 @@ class SOBase(MatrixLieGroup):
     # kernels, which the SE groups also call on the rotation part of their elements.
 
     def apply(self, target: hints.Array) -> jax.Array:
-        R, p = self._in_memory(*aligned(self, self._check_points(target)))
+        R, p = self._schedule.inputs(*aligned(self, self._check_points(target)))
         return R._apply_kernel(p)
 
     def multiply(self, other: Self) -> Self:
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         return a._multiply_kernel(b)
 
     @abc.abstractmethod
@@ -659,11 +627,11 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
     # XLA:CPU turns a barrier on a slice into a copy of it.
 
     def apply(self, target: hints.Array) -> jax.Array:
-        T, target = self._in_memory(*aligned(self, self._check_points(target)))
+        T, target = self._schedule.inputs(*aligned(self, self._check_points(target)))
         return T.rotation()._apply_kernel(target) + T.translation()
 
     def multiply(self, other: Self) -> Self:
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R = a.rotation()
         return type(self).from_rotation_and_translation(
             R._multiply_kernel(b.rotation()), R._apply_kernel(b.translation()) + a.translation()
@@ -674,7 +642,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         translations is exact (Sterbenz), where ``inverse().multiply`` adds −R_a⁻¹t_a to
         R_a⁻¹t_b and cancels ε·|t_a| (docs/design/relative-poses.md). One rotation of a
         point instead of two."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R_inv = a.rotation().inverse()
         return type(self).from_rotation_and_translation(
             R_inv._multiply_kernel(b.rotation()),
@@ -682,7 +650,7 @@ class SEBase(Generic[ContainedSOType], MatrixLieGroup):
         )
 
     def inverse(self) -> Self:
-        T = self._in_memory(self)
+        T = self._schedule.inputs(self)
         R_inv = T.rotation().inverse()
         return type(self).from_rotation_and_translation(
             R_inv, -R_inv._apply_kernel(T.translation())
@@ -751,54 +719,4 @@ def valid_atol(dtype: Any) -> float:
 
 def _interpolate(a: GroupT, b: GroupT, t: Any) -> GroupT:
     """``a @ exp(t · log(a⁻¹ @ b))``: ``interpolate``'s body, element by element."""
-    return a._along(a._in_memory_along(a._between(b)).log(), t)
-
-
-def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
-    """Stack elements of one group along a new batch axis.
-
-    Args:
-        elements: elements of one group, all of the same batch shape ``B``.
-        axis: position of the new axis, counted among the batch axes (the parameter axis
-            stays last); negative values count from the end of ``(*B, new)``.
-
-    Returns:
-        An element of batch shape ``B`` with ``len(elements)`` inserted at ``axis``.
-
-    Raises:
-        ValueError: no elements, or ``axis`` out of range.
-        TypeError: elements of different groups.
-    """
-    elements = list(elements)
-    if not elements:
-        raise ValueError("stack: need at least one element.")
-    G = type(elements[0])
-    if any(type(e) is not G for e in elements):
-        raise TypeError("stack: all elements must be of the same group.")
-    ndim = len(elements[0].get_batch_axes()) + 1
-    if not -ndim <= axis < ndim:
-        raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
-    return G(jnp.stack([e.parameters() for e in elements], axis=axis % ndim))
-
-
-def block_matrix(rows: Sequence[Sequence[Optional[jax.Array]]]) -> jax.Array:
-    """A matrix from blocks, ``(*batch, n_i, m_j)`` each, ``None`` for a zero block (its
-    size read from the other blocks of its row and column); batch axes broadcast."""
-    heights = [next(b.shape[-2] for b in row if b is not None) for row in rows]
-    widths = [next(b.shape[-1] for b in col if b is not None) for col in zip(*rows)]
-    present = [b for row in rows for b in row if b is not None]
-    batch = jnp.broadcast_shapes(*(b.shape[:-2] for b in present))
-    dtype = jnp.result_type(*present)
-
-    def fill(b: Optional[jax.Array], h: int, w: int) -> jax.Array:
-        if b is None:
-            return jnp.zeros((*batch, h, w), dtype)
-        return jnp.broadcast_to(b.astype(dtype), (*batch, h, w))
-
-    return jnp.concatenate(
-        [
-            jnp.concatenate([fill(b, h, w) for b, w in zip(row, widths)], axis=-1)
-            for row, h in zip(rows, heights)
-        ],
-        axis=-2,
-    )
+    return a._along(a._schedule.along(a._between(b)).log(), t)

@@ -1,14 +1,18 @@
-"""Evaluating an elementwise function over a large batch in chunks, on CPU, to bound its
-temporaries (``docs/design/memory-and-chunks.md``). A leaf module."""
+"""Batches of elements: stacking elements along a new batch axis, and evaluating an
+elementwise function over a large batch in chunks, on CPU, to bound its temporaries
+(``docs/design/memory-and-chunks.md``). A leaf module: elements are read through their
+``parameters`` and ``get_batch_axes`` alone."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence, Tuple
+from typing import Any, Callable, Sequence, Tuple, TypeVar, cast
 
 import jax
 import jax.numpy as jnp
 
-from ._checks import static_size
+from ._checks import as_float_array, static_size
+
+GroupT = TypeVar("GroupT")
 
 CHUNK = 2**16
 """Elements per chunk in ``in_chunks``."""
@@ -109,3 +113,51 @@ def in_chunks(f: Callable[..., Any], batch: Tuple[int, ...], *args: Any) -> Any:
 
     out = evaluate(*flat)
     return jax.tree_util.tree_map(lambda o: o.reshape(batch + o.shape[1:]), out)
+
+
+def pairwise_in_chunks(f: Callable[..., Any], a: Any, b: Any, t: Any, where: str) -> Any:
+    """``f(a, b, t)`` for two elements and times (``interpolate``), evaluated by
+    ``in_chunks`` where ``a`` and ``b`` are of one group and one batch shape that ``t``
+    broadcasts into (``t`` then a float array of the elements' dtype, broadcast to the
+    batch), and whole otherwise (``t`` as an array)."""
+    t = jnp.asarray(t)  # lists and tuples too, as in geodesic
+    batch = a.get_batch_axes()
+    same = type(b) is type(a) and b.get_batch_axes() == batch
+    t_shape = jnp.shape(t)
+    t_fits = len(t_shape) <= len(batch) and all(
+        m in (1, n) for m, n in zip(t_shape[::-1], batch[::-1])
+    )
+    if not (same and t_fits):
+        return f(a, b, t)
+    like = jnp.zeros((), jnp.result_type(a.parameters(), b.parameters()))
+    t = as_float_array(t, "t", (), where, like=like)
+    return in_chunks(f, batch, a, b, jnp.broadcast_to(t, batch))
+
+
+def stack(elements: Sequence[GroupT], axis: int = 0) -> GroupT:
+    """Stack elements of one group along a new batch axis.
+
+    Args:
+        elements: elements of one group, all of the same batch shape ``B``.
+        axis: position of the new axis, counted among the batch axes (the parameter axis
+            stays last); negative values count from the end of ``(*B, new)``.
+
+    Returns:
+        An element of batch shape ``B`` with ``len(elements)`` inserted at ``axis``.
+
+    Raises:
+        ValueError: no elements, or ``axis`` out of range.
+        TypeError: elements of different groups.
+    """
+    elements = list(elements)
+    if not elements:
+        raise ValueError("stack: need at least one element.")
+    first: Any = elements[0]
+    G = type(first)
+    if any(type(e) is not G for e in elements):
+        raise TypeError("stack: all elements must be of the same group.")
+    ndim = len(first.get_batch_axes()) + 1
+    if not -ndim <= axis < ndim:
+        raise ValueError(f"stack: axis {axis} out of range for {ndim} batch axes.")
+    params = [cast(Any, e).parameters() for e in elements]
+    return cast(GroupT, G(jnp.stack(params, axis=axis % ndim)))

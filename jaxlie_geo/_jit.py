@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import functools
 import inspect
-from typing import Any, Callable, TypeVar, cast
+import warnings
+from typing import Any, Callable, Dict, Optional, TypeVar, cast
 
 import jax
 
@@ -71,6 +72,8 @@ def jit_public_methods(cls: type) -> None:
         fn = raw.__func__ if kind else raw
         if not inspect.isfunction(fn) or getattr(fn, "_jitted", False):
             continue
+        if getattr(fn, "_deprecated_alias", False):  # warns on every call: never traced
+            continue
         if getattr(fn, "__isabstractmethod__", False):
             continue
         sig = inspect.signature(fn)
@@ -128,3 +131,28 @@ def jit_function(*static_argnames: str) -> Callable[[_F], _F]:
         return cast(_F, functools.wraps(fn)(lambda *args, **kwargs: jitted(*args, **kwargs)))
 
     return wrap
+
+
+def deprecated_alias(
+    old: str, new: str, *, on_class: bool = False, renamed: Optional[Dict[str, str]] = None
+) -> Any:
+    """The method ``old``, a deprecated name of the method ``new`` of the same class (a
+    classmethod where ``on_class``): it calls ``new``, with the keyword arguments in
+    ``renamed`` (old name → new name) passed under their new names. Every call warns
+    (``DeprecationWarning`` naming ``new``): the alias itself is not jitted."""
+    renamed = renamed or {}
+
+    def alias(owner: Any, *args: Any, **kwargs: Any) -> Any:
+        group = owner.__name__ if isinstance(owner, type) else type(owner).__name__
+        warnings.warn(
+            f"{group}.{old} is deprecated: use {group}.{new}.",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        kwargs = {renamed.get(k, k): v for k, v in kwargs.items()}
+        return getattr(owner, new)(*args, **kwargs)
+
+    alias.__name__ = alias.__qualname__ = old
+    alias.__doc__ = f"Deprecated alias of ``{new}``, kept for one release."
+    alias._deprecated_alias = True  # type: ignore[attr-defined]
+    return classmethod(alias) if on_class else alias

@@ -27,12 +27,13 @@ import functools
 import math
 import sys
 import time
-from typing import Any, Optional, Protocol, Sequence, Tuple
+from typing import Any, Optional, Protocol, Sequence, Tuple, get_args
 
 import jax
 import jax.numpy as jnp
 import numpy as onp
 
+from . import hints
 from ._sparse import (
     DAMPING_FLOOR,
     BandedCholesky,
@@ -57,7 +58,7 @@ MIN_DAMPING = 1e-15
 MAX_DAMPING = 1e16
 
 #: The names ``linear_solver`` accepts.
-LINEAR_SOLVERS = ("auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg")
+LINEAR_SOLVERS = get_args(hints.LinearSolver)
 
 #: ``"auto"`` takes the banded Cholesky (when neither sparse package is installed) only if
 #: the band holds at most this many times the pattern's stored entries.
@@ -109,14 +110,14 @@ class Solution:
 
 def check_options(
     caller: str,
-    method: str,
-    linear_solver: str,
+    method: hints.SolverMethod,
+    linear_solver: hints.LinearSolver,
     max_iterations: int,
     **positive: float,
 ) -> None:
     """``ValueError`` naming the argument, for a method, linear solver or iteration limit
     out of range, or a value of ``positive`` that is not a positive finite number."""
-    if method not in ("lm", "gn"):
+    if method not in get_args(hints.SolverMethod):
         raise ValueError(f"{caller}: method must be 'lm' or 'gn', got {method!r}")
     if linear_solver not in LINEAR_SOLVERS:
         names = ", ".join(repr(s) for s in LINEAR_SOLVERS)
@@ -263,7 +264,7 @@ def system(
     indices: Sequence[onp.ndarray],
     n: int,
     k: int,
-    linear_solver: str,
+    linear_solver: hints.LinearSolver,
     diagonal_damping: bool = False,
     cg_tolerance: float = 1e-10,
     cg_max_iterations: int = 2000,
@@ -286,7 +287,7 @@ def minimise(
     data: Any,
     linear: Any,
     *,
-    method: str = "lm",
+    method: hints.SolverMethod = "lm",
     max_iterations: int = 100,
     tolerance: float = 1e-7,
     initial_damping: float = 1e-5,

@@ -15,7 +15,7 @@ from ._checks import as_float_array, check_batches
 from ._pytree import pytree_dataclass
 from ._scalar import components
 from ._so2 import SO2
-from ._xla import constant
+from ._xla import Schedule, constant
 
 _I2, _ROT90, _E02, _E12, _E22 = (
     onp.array(m, dtype=onp.float64).reshape(3, 3)
@@ -47,7 +47,7 @@ class SE2(SEBase[SO2]):
     tangent_dim = 3
     space_dim = 2
     _rotation_type = SO2
-    _kernels_reread = True
+    _schedule = Schedule(reread=True)
 
     @staticmethod
     def from_xy_theta(x: hints.Scalar, y: hints.Scalar, theta: hints.Scalar) -> SE2:

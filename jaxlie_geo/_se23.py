@@ -16,8 +16,9 @@ import jax.numpy as jnp
 from typing_extensions import override
 
 from . import _scalar, hints
-from ._base import MatrixLieGroup, block_matrix
+from ._base import MatrixLieGroup
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
+from ._jit import deprecated_alias
 from ._pytree import pytree_dataclass
 from ._scalar import dot, sq_norm
 from ._se3 import SE3, coupled_inverse, coupling_entries, exp_translation, log_translation
@@ -30,7 +31,15 @@ from ._so3 import (
     rodrigues_entries,
     skew,
 )
-from ._xla import aligned, from_block_entries, materialize_columns, matmul, matmul_unrolled
+from ._xla import (
+    Schedule,
+    aligned,
+    block_matrix,
+    from_block_entries,
+    materialize_columns,
+    matmul,
+    matmul_unrolled,
+)
 
 
 @pytree_dataclass
@@ -55,30 +64,29 @@ class SE23(MatrixLieGroup):
     parameters_dim = 10
     tangent_dim = 9
     space_dim = 3
-    _kernels_reread = True
-    _interpolate_in_memory = True
+    _schedule = Schedule(reread=True, interpolate_in_memory=True)
 
     # -- construction and accessors -------------------------------------------------
 
     @classmethod
-    def from_rotation_position_velocity(
-        cls, rotation: SO3, position: hints.Array, velocity: hints.Array
+    def from_rotation_translation_and_velocity(
+        cls, rotation: SO3, translation: hints.Array, velocity: hints.Array
     ) -> SE23:
         """The extended pose (R, p, v); batch axes of the three broadcast.
 
         Args:
             rotation: an ``SO3``.
-            position: ``(*batch, 3)``.
+            translation: ``(*batch, 3)``, the position p.
             velocity: ``(*batch, 3)``.
         """
-        where = "SE23.from_rotation_position_velocity"
+        where = "SE23.from_rotation_translation_and_velocity"
         check_type(where, "rotation", rotation, SO3)
         r = rotation.parameters()
-        p = as_float_array(position, "position", (3,), where, like=r)
+        p = as_float_array(translation, "translation", (3,), where, like=r)
         v = as_float_array(velocity, "velocity", (3,), where, like=r)
         batch = check_batches(
             where,
-            "rotation, position and velocity batch axes",
+            "rotation, translation and velocity batch axes",
             r.shape[:-1],
             p.shape[:-1],
             v.shape[:-1],
@@ -88,29 +96,42 @@ class SE23(MatrixLieGroup):
         return SE23(jnp.concatenate(parts, axis=-1))
 
     @classmethod
-    def from_pose_velocity(cls, pose: SE3, velocity: hints.Array) -> SE23:
+    def from_pose_and_velocity(cls, pose: SE3, velocity: hints.Array) -> SE23:
         """The extended pose of an ``SE3`` pose (R, p) and a velocity v."""
-        check_type("SE23.from_pose_velocity", "pose", pose, SE3)
-        return cls.from_rotation_position_velocity(pose.rotation(), pose.translation(), velocity)
+        check_type("SE23.from_pose_and_velocity", "pose", pose, SE3)
+        return cls.from_rotation_translation_and_velocity(
+            pose.rotation(), pose.translation(), velocity
+        )
 
     def rotation(self) -> SO3:
         """R, an ``SO3`` with the same batch axes."""
         return SO3(self.wxyz_xyz_vel[..., :4])
 
-    def position(self) -> jax.Array:
-        """p, ``(*batch, 3)``."""
+    def translation(self) -> jax.Array:
+        """p, the position, ``(*batch, 3)``."""
         return self.wxyz_xyz_vel[..., 4:7]
 
     def velocity(self) -> jax.Array:
         """v, ``(*batch, 3)``."""
         return self.wxyz_xyz_vel[..., 7:]
 
+    from_rotation_position_velocity = deprecated_alias(
+        "from_rotation_position_velocity",
+        "from_rotation_translation_and_velocity",
+        on_class=True,
+        renamed={"position": "translation"},
+    )
+    from_pose_velocity = deprecated_alias(
+        "from_pose_velocity", "from_pose_and_velocity", on_class=True
+    )
+    position = deprecated_alias("position", "translation")
+
     def pose(self) -> SE3:
         """The pose (R, p) as an ``SE3`` (the first seven parameters)."""
         return SE3(self.wxyz_xyz_vel[..., :7])
 
     def _parts(self) -> Tuple[SO3, jax.Array, jax.Array]:
-        return self.rotation(), self.position(), self.velocity()
+        return self.rotation(), self.translation(), self.velocity()
 
     def _unit_part(self) -> jax.Array:
         return self.wxyz_xyz_vel[..., :4]
@@ -135,7 +156,7 @@ class SE23(MatrixLieGroup):
         k0, k1 = jax.random.split(key)
         rot = SO3.sample_uniform(k0, batch_axes, dtype)
         pv = jax.random.uniform(k1, (*batch_axes, 6), dtype=dtype, minval=-1.0, maxval=1.0)
-        return cls.from_rotation_position_velocity(rot, pv[..., :3], pv[..., 3:])
+        return cls.from_rotation_translation_and_velocity(rot, pv[..., :3], pv[..., 3:])
 
     # -- exp, log and the algebra ---------------------------------------------------
 
@@ -160,7 +181,7 @@ class SE23(MatrixLieGroup):
         """Principal logarithm (ρ, ω, ν), ``(*batch, 9)``, ‖ω‖ ∈ [0, π]: ρ = V⁻¹ p and
         ν = V⁻¹ v as in ``SE3.log`` (``_se3.log_translation``), from one quaternion log."""
         u, s, h = log_quaternion_parts(self.wxyz_xyz_vel[..., :4])
-        rho = log_translation(self.position(), u, s, h)
+        rho = log_translation(self.translation(), u, s, h)
         nu = log_translation(self.velocity(), u, s, h)
         return jnp.concatenate([rho, s[..., None] * u, nu], axis=-1)
 
@@ -184,7 +205,7 @@ class SE23(MatrixLieGroup):
         R = self.rotation().as_matrix()
         return block_matrix(
             [
-                [R, matmul(skew(self.position()), R), None],
+                [R, matmul(skew(self.translation()), R), None],
                 [None, R, None],
                 [None, matmul(skew(self.velocity()), R), R],
             ]
@@ -207,7 +228,7 @@ class SE23(MatrixLieGroup):
         Rx = [matmul_unrolled(R, tangent[..., i : i + 3, None])[..., 0] for i in (0, 3, 6)]
         return jnp.concatenate(
             [
-                Rx[0] + cross(self.position(), Rx[1]),
+                Rx[0] + cross(self.translation(), Rx[1]),
                 Rx[1],
                 Rx[2] + cross(self.velocity(), Rx[1]),
             ],
@@ -277,7 +298,7 @@ class SE23(MatrixLieGroup):
         nearest rotation to any block), p and v the fourth and fifth columns as they are;
         the bottom rows are not read."""
         m = cls._check_matrix(matrix, "from_matrix")
-        return cls.from_rotation_position_velocity(
+        return cls.from_rotation_translation_and_velocity(
             SO3.from_matrix(m[..., :3, :3], project), m[..., :3, 3], m[..., :3, 4]
         )
 
@@ -289,13 +310,13 @@ class SE23(MatrixLieGroup):
     @override
     def multiply(self, other: SE23) -> SE23:
         """(R₁R₂, R₁p₂ + p₁, R₁v₂ + v₁)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R = a.rotation()
         return SE23(
             jnp.concatenate(
                 [
                     R._multiply_kernel(b.rotation()).wxyz,
-                    R._apply_kernel(b.position()) + a.position(),
+                    R._apply_kernel(b.translation()) + a.translation(),
                     R._apply_kernel(b.velocity()) + a.velocity(),
                 ],
                 axis=-1,
@@ -305,13 +326,13 @@ class SE23(MatrixLieGroup):
     def _between(self, other: SE23) -> SE23:
         """``self⁻¹ @ other`` = (R₁⁻¹R₂, R₁⁻¹(p₂ − p₁), R₁⁻¹(v₂ − v₁)): nearby positions
         and velocities subtract exactly (as ``SE3``'s)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R_inv = a.rotation().inverse()
         return SE23(
             jnp.concatenate(
                 [
                     R_inv._multiply_kernel(b.rotation()).wxyz,
-                    R_inv._apply_kernel(b.position() - a.position()),
+                    R_inv._apply_kernel(b.translation() - a.translation()),
                     R_inv._apply_kernel(b.velocity() - a.velocity()),
                 ],
                 axis=-1,
@@ -321,13 +342,13 @@ class SE23(MatrixLieGroup):
     @override
     def inverse(self) -> SE23:
         """(R⁻¹, −R⁻¹p, −R⁻¹v)."""
-        T = self._in_memory(self)
+        T = self._schedule.inputs(self)
         R_inv = T.rotation().inverse()
         return SE23(
             jnp.concatenate(
                 [
                     R_inv.wxyz,
-                    -R_inv._apply_kernel(T.position()),
+                    -R_inv._apply_kernel(T.translation()),
                     -R_inv._apply_kernel(T.velocity()),
                 ],
                 axis=-1,

@@ -25,6 +25,7 @@ from ._so3 import (
 )
 from ._xla import (
     Entries,
+    Schedule,
     entries_product,
     from_block_entries,
     materialize_columns,
@@ -151,9 +152,7 @@ class SE3(SEBase[SO3]):
     tangent_dim = 6
     space_dim = 3
     _rotation_type = SO3
-    _interpolate_in_chunks = True
-    _kernels_reread = True
-    _interpolate_in_memory = True
+    _schedule = Schedule(reread=True, interpolate_in_memory=True, interpolate_in_chunks=True)
 
     @classmethod
     @override

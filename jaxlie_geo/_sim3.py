@@ -2,7 +2,7 @@
 
 The exponential's translation integrates exp(τ(ω̂ + σI)) over τ ∈ [0, 1]; its coefficients
 are joint functions of the rotation angle θ and the log-scale σ, evaluated by
-``_scalar.sim3_coefficients`` without the cancellation of the textbook closed forms as
+``_scalar_sim3.sim3_coefficients`` without the cancellation of the textbook closed forms as
 θ and σ go to 0 together.
 """
 
@@ -14,10 +14,11 @@ import jax
 import jax.numpy as jnp
 from typing_extensions import override
 
-from . import _scalar, hints
+from . import _scalar, _scalar_sim3, hints
 from ._alignment import umeyama_parts
-from ._base import MatrixLieGroup, block_matrix
+from ._base import MatrixLieGroup
 from ._checks import as_float_array, check_batches, check_type, resolve_dtype
+from ._jit import deprecated_alias
 from ._pytree import pytree_dataclass
 from ._scalar import components, dot, pow2_inverse, sq_norm
 from ._so3 import (
@@ -30,7 +31,7 @@ from ._so3 import (
     log_quaternion_parts,
     skew,
 )
-from ._xla import aligned, materialize_columns, matmul
+from ._xla import Schedule, aligned, block_matrix, materialize_columns, matmul
 
 
 def _eye3(like: jax.Array) -> jax.Array:
@@ -99,13 +100,12 @@ class Sim3(MatrixLieGroup):
     parameters_dim = 8
     tangent_dim = 7
     space_dim = 3
-    _kernels_reread = True
-    _interpolate_in_memory = True
+    _schedule = Schedule(reread=True, interpolate_in_memory=True)
 
     # -- construction and accessors -------------------------------------------------
 
     @classmethod
-    def from_rotation_translation_scale(
+    def from_rotation_translation_and_scale(
         cls, rotation: SO3, translation: hints.Array, scale: hints.Array
     ) -> Sim3:
         """The similarity x ↦ s R x + t; batch axes of the three broadcast.
@@ -116,12 +116,16 @@ class Sim3(MatrixLieGroup):
             scale: s, shape ``batch`` (a scalar for one element). Stored as log s: s ≤ 0
                 gives a log-scale of NaN (s < 0) or −inf (s = 0), which ``is_valid`` reports.
         """
-        where = "Sim3.from_rotation_translation_scale"
+        where = "Sim3.from_rotation_translation_and_scale"
         check_type(where, "rotation", rotation, SO3)
         r = rotation.parameters()
         t = as_float_array(translation, "translation", (3,), where, like=r)
         s = as_float_array(scale, "scale", (), where, like=r)
         return cls._assemble(where, r, t, jnp.log(s))
+
+    from_rotation_translation_scale = deprecated_alias(
+        "from_rotation_translation_scale", "from_rotation_translation_and_scale", on_class=True
+    )
 
     @classmethod
     def _assemble(cls, where: str, r: jax.Array, t: jax.Array, log_s: jax.Array) -> Sim3:
@@ -188,7 +192,7 @@ class Sim3(MatrixLieGroup):
     def exp(cls, tangent: hints.Array) -> Sim3:
         """Exponential map of (v, ω, σ): q = exp_SO3(ω), log-scale σ (exactly), and
         t = W v with W = ∫₀¹ exp(τ(ω̂ + σI)) dτ = D0 I + B ω̂ + C ωωᵀ, the coefficients
-        from ``_scalar.sim3_coefficients`` (accurate jointly in θ and σ).
+        from ``_scalar_sim3.sim3_coefficients`` (accurate jointly in θ and σ).
 
         Args:
             tangent: ``(*batch, 7)``.
@@ -200,7 +204,7 @@ class Sim3(MatrixLieGroup):
         xi = cls._check_tangent(tangent)
         v, w, sigma = xi[..., :3], xi[..., 3:6], xi[..., 6]
         half = exp_half_angle(w)
-        coeffs = _scalar.sim3_coefficients(sigma, sq_norm(w), half)
+        coeffs = _scalar_sim3.sim3_coefficients(sigma, sq_norm(w), half)
         t = _w_apply(coeffs, w, v)
         return Sim3(jnp.concatenate([exp_quaternion(w, half), t, sigma[..., None]], axis=-1))
 
@@ -215,7 +219,7 @@ class Sim3(MatrixLieGroup):
         # cos(θ/2) = |q_w|/‖q‖ and sin(θ/2)/(θ/2) = 2/(s‖q‖), read off the quaternion
         norm = jnp.sqrt(sq_norm(q))
         half = (jnp.abs(q[..., 0]) / norm, 2.0 / (s * norm))
-        coeffs = _scalar.sim3_coefficients(sigma, sq_norm(w), half)
+        coeffs = _scalar_sim3.sim3_coefficients(sigma, sq_norm(w), half)
         v = _w_inverse_apply(coeffs, u, self.translation(), s)
         return jnp.concatenate([v, w, sigma[..., None]], axis=-1)
 
@@ -273,7 +277,7 @@ class Sim3(MatrixLieGroup):
             ∂t/∂σ = D0_σ v + B_σ ω×v + C_σ (ω·v) ω,
             ∂t/∂ω = 2 (D0_x v + B_x ω×v + C_x (ω·v) ω) ωᵀ − B v̂ + C (ω vᵀ + (ω·v) I),
 
-        and every coefficient is a member of ``_scalar.sim3_family``, in closed form:
+        and every coefficient is a member of ``_scalar_sim3.sim3_family``, in closed form:
         (D0, B, C)_σ = T_{1,0}, T_{1,1}, T_{1,2}; 2 D0_x = −T_{1,1}, 2 B_x = T_{0,3} − T_{1,2},
         2 C_x = 2T_{0,4} − T_{1,3}."""
         v, w, sigma = xi[..., :3], xi[..., 3:6], xi[..., 6]
@@ -281,7 +285,7 @@ class Sim3(MatrixLieGroup):
         q = exp_quaternion(w)
         # Computed once into one array: fused, each is recomputed per entry that reads it.
         a, d0, b, c, _, d1_0, d1_1, d1_2, d0_3, d1_3, d0_4, q0, q1, q2, q3 = materialize_columns(
-            *_scalar.sim3_family(sigma, x, _scalar.COEFFICIENTS_AND_DERIVATIVES),
+            *_scalar_sim3.sim3_family(sigma, x, _scalar_sim3.COEFFICIENTS_AND_DERIVATIVES),
             *components(q),
         )
         coeffs = (a, d0, b, c)
@@ -392,13 +396,13 @@ class Sim3(MatrixLieGroup):
     @override
     def apply(self, target: hints.Array) -> jax.Array:
         """Points x ↦ s R x + t, ``(*batch, 3)``."""
-        T, p = self._in_memory(*aligned(self, self._check_points(target)))
+        T, p = self._schedule.inputs(*aligned(self, self._check_points(target)))
         return T.scale()[..., None] * T.rotation()._apply_kernel(p) + T.translation()
 
     @override
     def multiply(self, other: Sim3) -> Sim3:
         """(R₁R₂, s₁R₁t₂ + t₁, σ₁ + σ₂)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R = a.rotation()
         t = a.scale()[..., None] * R._apply_kernel(b.translation()) + a.translation()
         return Sim3(
@@ -414,7 +418,7 @@ class Sim3(MatrixLieGroup):
 
     def _between(self, other: Sim3) -> Sim3:
         """``self⁻¹ @ other`` = (R₁⁻¹R₂, s₁⁻¹R₁⁻¹(t₂ − t₁), σ₂ − σ₁)."""
-        a, b = self._in_memory(*aligned(self, other))
+        a, b = self._schedule.inputs(*aligned(self, other))
         R_inv = a.rotation().inverse()
         t = jnp.exp(-a.log_scale())[..., None] * R_inv._apply_kernel(
             b.translation() - a.translation()
@@ -433,7 +437,7 @@ class Sim3(MatrixLieGroup):
     @override
     def inverse(self) -> Sim3:
         """(R⁻¹, −s⁻¹R⁻¹t, −σ)."""
-        T = self._in_memory(self)
+        T = self._schedule.inputs(self)
         R_inv = T.rotation().inverse()
         t = -jnp.exp(-T.log_scale())[..., None] * R_inv._apply_kernel(T.translation())
         return Sim3(jnp.concatenate([R_inv.wxyz, t, -T.log_scale()[..., None]], axis=-1))
@@ -495,4 +499,4 @@ class Sim3(MatrixLieGroup):
                 of the shapes above.
         """
         r, t, s = umeyama_parts(source, target, weights, True, "Sim3.align")
-        return cls.from_rotation_translation_scale(SO3.from_matrix(r), t, s)
+        return cls.from_rotation_translation_and_scale(SO3.from_matrix(r), t, s)

@@ -15,7 +15,7 @@ from ._checks import as_float_array, resolve_dtype
 from ._projection import nearest_quaternion, rotation_quaternion
 from ._pytree import pytree_dataclass
 from ._scalar import components, sq_norm
-from ._xla import Entries, constant, from_entries
+from ._xla import Entries, Schedule, constant, from_entries
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -218,8 +218,7 @@ class SO3(SOBase):
     parameters_dim = 4
     tangent_dim = 3
     space_dim = 3
-    _kernels_reread = True
-    _interpolate_in_memory = True
+    _schedule = Schedule(reread=True, interpolate_in_memory=True)
 
     # -- factories ------------------------------------------------------------------
 

@@ -1,5 +1,5 @@
-"""How the kernels are laid out for XLA: barriers, rank alignment, constants, matrix
-products, and the version gates they depend on.
+"""How the kernels are laid out for XLA: barriers, rank alignment, constants, matrices
+assembled from entries and blocks, matrix products, and the version gates they depend on.
 
 Nothing here changes a value: each helper decides only how XLA schedules or broadcasts a
 computation. Why each exists, with the measurements, is in the design notes
@@ -10,6 +10,7 @@ A leaf module: it knows a group element by its interface (``_checks.is_element``
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import re
 from typing import Any, List, Optional, Sequence, Tuple
@@ -93,6 +94,38 @@ def materialize(*xs: Any) -> Any:
     """
     out = _barrier(xs) if TANGENTS_PASS_THROUGH else jax.lax.optimization_barrier(xs)
     return out[0] if len(xs) == 1 else out
+
+
+@dataclasses.dataclass(frozen=True)
+class Schedule:
+    """How XLA schedules a group's kernels, never their values: which inputs are computed
+    into memory before a kernel reads them, and whether large ``interpolate`` batches run
+    in chunks (``docs/design/memory-and-chunks.md`` has the measurements). Each group
+    class sets its own (``MatrixLieGroup._schedule``)."""
+
+    reread: bool = False
+    """Whether the group's kernels read each input component several times (the quaternion
+    groups: a Hamilton product reads each of 8 components 4 times), so that ``multiply``,
+    ``apply``, ``inverse`` and ``interpolate`` compute their inputs into memory first
+    (``inputs``). Without the barrier XLA:CPU fuses a producer into every read of it: an
+    exp's sincos is recomputed per read, and a chain of K compositions grows as 4^K."""
+    interpolate_in_memory: bool = False
+    """Whether ``interpolate`` also computes its relative element, log and exp into memory
+    before the next kernel reads them (``along``)."""
+    interpolate_in_chunks: bool = False
+    """Whether large ``interpolate`` batches run in chunks on CPU (``_batch.in_chunks``)."""
+
+    def inputs(self, *xs: Any) -> Any:
+        """The inputs computed once into memory (``materialize``) where ``reread``, else as
+        they are; one value for one input, else a tuple."""
+        if self.reread:
+            return materialize(*xs)
+        return xs[0] if len(xs) == 1 else xs
+
+    def along(self, x: Any) -> Any:
+        """``x`` computed into memory inside ``interpolate`` and geodesics where
+        ``interpolate_in_memory``, else as it is."""
+        return materialize(x) if self.interpolate_in_memory else x
 
 
 def materialize_columns(*xs: jax.Array) -> List[jax.Array]:
@@ -189,3 +222,26 @@ def matmul_unrolled(A: jax.Array, B: jax.Array) -> jax.Array:
             row.append(acc)
         rows.append(jnp.stack(row, axis=-1))
     return jnp.stack(rows, axis=-2)
+
+
+def block_matrix(rows: Sequence[Sequence[Optional[jax.Array]]]) -> jax.Array:
+    """A matrix from blocks, ``(*batch, n_i, m_j)`` each, ``None`` for a zero block (its
+    size read from the other blocks of its row and column); batch axes broadcast."""
+    heights = [next(b.shape[-2] for b in row if b is not None) for row in rows]
+    widths = [next(b.shape[-1] for b in col if b is not None) for col in zip(*rows)]
+    present = [b for row in rows for b in row if b is not None]
+    batch = jnp.broadcast_shapes(*(b.shape[:-2] for b in present))
+    dtype = jnp.result_type(*present)
+
+    def fill(b: Optional[jax.Array], h: int, w: int) -> jax.Array:
+        if b is None:
+            return jnp.zeros((*batch, h, w), dtype)
+        return jnp.broadcast_to(b.astype(dtype), (*batch, h, w))
+
+    return jnp.concatenate(
+        [
+            jnp.concatenate([fill(b, h, w) for b, w in zip(row, widths)], axis=-1)
+            for row, h in zip(rows, heights)
+        ],
+        axis=-2,
+    )

@@ -1,6 +1,7 @@
-"""Type aliases (same names as jaxlie.hints)."""
+"""Type aliases: jaxlie.hints' names, and one ``Literal`` per set of string options the
+package's functions take."""
 
-from typing import NamedTuple, Union
+from typing import Literal, NamedTuple, Union
 
 import jax
 import numpy as onp
@@ -12,6 +13,19 @@ Scalar = Union[float, Array]
 """A Python float or an array."""
 
 
+SolverMethod = Literal["lm", "gn"]
+"""A least-squares solver's iteration: Levenberg–Marquardt or Gauss–Newton."""
+
+LinearSolver = Literal["auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg"]
+"""How a least-squares step's normal equations are solved (``pose_graph.solve``)."""
+
+Frame = Literal["body", "world"]
+"""The frame a spline's velocity, acceleration or jerk is expressed in."""
+
+PoseGraphFormat = Literal["g2o", "toro"]
+"""A pose-graph file format, and the order of the information matrix it stores."""
+
+
 class RollPitchYaw(NamedTuple):
     """Euler angles in radians, ZYX mobile-robot convention."""
 
@@ -20,4 +34,12 @@ class RollPitchYaw(NamedTuple):
     yaw: Scalar
 
 
-__all__ = ["Array", "Scalar", "RollPitchYaw"]
+__all__ = [
+    "Array",
+    "Scalar",
+    "RollPitchYaw",
+    "SolverMethod",
+    "LinearSolver",
+    "Frame",
+    "PoseGraphFormat",
+]

@@ -224,7 +224,7 @@ def _chunked_ops():
     ops = [
         (G, "interpolate", lambda p, q, t, G=G: G(p).interpolate(G(q), t).parameters())
         for G in GROUPS
-        if G._interpolate_in_chunks
+        if G._schedule.interpolate_in_chunks
     ]
     assert ops  # SE3's
     return ops
@@ -292,7 +292,7 @@ n = 4096  # 1024 per device: shard_map's per-device batch is chunked too
 rng = np.random.default_rng(0)
 ops = {}
 for G in (getattr(jaxlie_geo, name) for name in GROUP_NAMES):
-    if G._interpolate_in_chunks:
+    if G._schedule.interpolate_in_chunks:
         ops[G.__name__ + ".interpolate"] = (
             lambda a, b, t, G=G: G.exp(a).interpolate(G.exp(b), t).parameters(), G.tangent_dim)
 SE3 = jaxlie_geo.SE3
@@ -484,7 +484,7 @@ def test_elementwise_ops_on_a_sharded_batch_have_no_collectives():
             assert f"{G.__name__}.{name}[0]" not in report["constant"], report["constant"]
 
 
-@pytest.mark.parametrize("G", [G for G in GROUPS if G._interpolate_in_chunks], ids=str)
+@pytest.mark.parametrize("G", [G for G in GROUPS if G._schedule.interpolate_in_chunks], ids=str)
 def test_barrier_tangent_pass_through_keeps_derivatives(G, small_chunks, monkeypatch):
     """``materialize``'s jax ≥ 0.11 form (tangents bypass the barrier, ``_xla._barrier``)
     gives the gradient through the chunked ``interpolate`` (through ``in_chunks``' custom
@@ -579,7 +579,7 @@ def _flops(f, *specs) -> float:
 def test_chains_of_compositions_cost_each_step_once(G):
     """A chain of K compositions of computed elements, log(exp(x) @ exp(x/K) @ … @ exp(x)),
     costs each step once: XLA's flop count of the compiled program grows by the cost of one
-    exp and one compose per step. Without the barriers of ``_kernels_reread`` XLA fuses
+    exp and one compose per step. Without the barriers of ``Schedule.reread`` XLA fuses
     each product into every read of it, which multiplies the work per step (SO3: twice the
     flops; SE3: growing with K, and an SO3 chain of 4 at 10⁶ elements did not finish in
     minutes)."""

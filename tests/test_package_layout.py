@@ -21,7 +21,8 @@ PACKAGE = pathlib.Path(jaxlie_geo.__file__).parent
 BENCHMARKS = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 
 LEAVES = {
-    "hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_projection", "_sparse",
+    "hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_scalar_sim3",
+    "_projection", "_sparse",
     "_least_squares",
 }  # fmt: skip
 """Modules with no knowledge of the group classes: the base imports them, never the reverse."""

@@ -1,4 +1,4 @@
-"""The scalar kernels of jaxlie_geo._scalar against mpmath at 50 digits.
+"""The scalar kernels of jaxlie_geo._scalar and _scalar_sim3 against mpmath at 50 digits.
 
 For each kernel f(x), x = θ², over its whole domain (exactly 0, subnormal and tiny x, both
 sides of every series/closed-form switch, and large angles), we measure the error of the
@@ -12,7 +12,7 @@ is the change caused by one ulp of x: every caller forms x = θ² in floating po
 large angles (cos √x at θ = 10π) that rounding, not the kernel, dominates. The reference is
 the exact power series (rational coefficients) below x = 4 and the closed form above, both at
 50 digits, evaluated at the float the kernel actually received. Run as a script to print
-the table that the docstrings of _scalar quote.
+the tables that the docstrings of _scalar and _scalar_sim3 quote.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from _diskcache import disk_cached
 
-from jaxlie_geo import _scalar
+from jaxlie_geo import _scalar, _scalar_sim3
 
 mp.mp.dps = 50
 jax.config.update("jax_enable_x64", True)
@@ -302,7 +302,7 @@ _SIM3_ORDERS = [(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)]
 def _sim3_derivatives(sig, xs):
     """(D0, B, C) and their partial derivatives up to order 2 in (σ, x), keyed by (n, m) =
     (order in σ, order in x), in one program."""
-    f = lambda s, x: jnp.stack(_scalar.sim3_coefficients(s, x)[1:])
+    f = lambda s, x: jnp.stack(_scalar_sim3.sim3_coefficients(s, x)[1:])
     H = jax.vmap(jax.hessian(f, (0, 1)))(sig, xs)
     return {
         (0, 0): jax.vmap(f)(sig, xs),
@@ -397,7 +397,7 @@ def test_sim3_family_accuracy(dtype):
     mpmath where the first derivatives of D0, B, C read it (p ≤ 1, m ≤ 4) and within 12
     elsewhere (second and third derivatives), for θ ≤ π and |σ| ≤ 20."""
     sig, xs, refs = _family_refs(np.dtype(dtype).name)
-    got = jax.jit(lambda s, x: _scalar.sim3_family(s, x, FAMILY_INDEX))(sig, xs)
+    got = jax.jit(lambda s, x: _scalar_sim3.sim3_family(s, x, FAMILY_INDEX))(sig, xs)
     eps = float(np.finfo(dtype).eps)
     for k, (p, m) in enumerate(FAMILY_INDEX):
         err = np.abs(np.asarray(got[k], np.float64) - refs[0, k]) / (eps * refs[1, k])
@@ -412,15 +412,12 @@ def test_sim3_family_derivatives_are_members():
     s = np.array([-12.0, -3.0, 0.3, 5.0, 12.0, -1.0, 2.0])
     x = np.array([0.7, 2.0, 1.0, 9.0, 3.0, 6.0, 12.0])
     index = ((0, -1), (0, 0), (0, 1), (0, 2), (1, 3), (0, 4))
-    f = jax.jit(lambda s, x: jnp.stack(_scalar.sim3_family(s, x, index)))
+    family = _scalar_sim3.sim3_family
+    f = jax.jit(lambda s, x: jnp.stack(family(s, x, index)))
     ds, dx = jax.jit(
         lambda s, x: (
-            jnp.stack(
-                jax.jvp(lambda s: _scalar.sim3_family(s, x, index), (s,), (jnp.ones_like(s),))[1]
-            ),
-            jnp.stack(
-                jax.jvp(lambda x: _scalar.sim3_family(s, x, index), (x,), (jnp.ones_like(x),))[1]
-            ),
+            jnp.stack(jax.jvp(lambda s: family(s, x, index), (s,), (jnp.ones_like(s),))[1]),
+            jnp.stack(jax.jvp(lambda x: family(s, x, index), (x,), (jnp.ones_like(x),))[1]),
         )
     )(s, x)
     h = 1e-5
@@ -436,7 +433,7 @@ def test_sim3_moments_are_the_integrals():
     s = np.array(
         [-30.0, -20.0, -4.0001, -3.9999, -1.0, -1e-9, 0.0, 1e-9, 1.0, 3.9999, 4.0001, 20.0]
     )
-    got = np.asarray(_scalar.sim3_moments(jnp.asarray(s), 4))
+    got = np.asarray(_scalar_sim3.sim3_moments(jnp.asarray(s), 4))
     eps = float(np.finfo(np.float64).eps)
     for i, si in enumerate(s):
         for k in range(5):

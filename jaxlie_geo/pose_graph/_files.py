@@ -44,17 +44,18 @@ tokens and otherwise ignored.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
-from typing import Dict, List, Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, cast, get_args
 
 import numpy as onp
 
-from ._graph import POSE_WIDTH, TANGENT_DIM, PoseGraph
+from .. import hints
+from .._so3 import SO3
+from .._xla import x64
+from ._graph import POSE_WIDTH, TANGENT_DIM, PoseGraph, from_group, to_group
 
 PathLike = Union[str, "os.PathLike[str]"]
-InformationOrder = Literal["g2o", "toro"]
-FileFormat = Literal["g2o", "toro"]
+_FORMATS = get_args(hints.PoseGraphFormat)
 
 #: |‖q‖ − 1| above which a g2o quaternion is rejected (files store about 6 digits).
 QUATERNION_NORM_TOLERANCE = 1e-3
@@ -64,7 +65,7 @@ QUATERNION_NORM_TOLERANCE = 1e-3
 class _Tag:
     name: str
     dim: int
-    format: str  # "g2o" or "toro"
+    format: hints.PoseGraphFormat
     is_edge: bool
     numbers: int  # tokens after the tag, ids included
 
@@ -93,7 +94,7 @@ _NAMES = {"g2o": "g2o", "toro": "TORO"}
 _IGNORED = {"EQUIV": (2, 2), "FIX": (1, None)}
 
 
-def _upper_triangle(k: int, order: str) -> Tuple[onp.ndarray, onp.ndarray]:
+def _upper_triangle(k: int, order: hints.PoseGraphFormat) -> Tuple[onp.ndarray, onp.ndarray]:
     """Row and column of each stored information entry, in the file's order."""
     if k == 3 and order == "toro":  # xx, xy, yy, θθ, xθ, yθ
         return onp.array([0, 0, 1, 2, 0, 1]), onp.array([0, 1, 1, 2, 2, 2])
@@ -229,13 +230,13 @@ def _pose_values(records: _Records, start: int) -> onp.ndarray:
     return onp.concatenate([xyz, rpy_to_quaternion(rpy)], axis=1)
 
 
-def _information(records: _Records, order: str) -> onp.ndarray:
+def _information(records: _Records, order: hints.PoseGraphFormat) -> onp.ndarray:
     """The information matrices ``(n, k, k)``, the entries read in ``order``."""
     k = TANGENT_DIM[records.tag.dim]
     return _fill(records.values[:, -(k * (k + 1) // 2) :], k, order)
 
 
-def _fill(entries: onp.ndarray, k: int, order: str) -> onp.ndarray:
+def _fill(entries: onp.ndarray, k: int, order: hints.PoseGraphFormat) -> onp.ndarray:
     """``(n, k(k+1)/2)`` upper-triangle entries in the file's order to ``(n, k, k)``."""
     rows, cols = _upper_triangle(k, order)
     out = onp.zeros((len(entries), k, k))
@@ -252,7 +253,7 @@ def _is_positive_definite(m: onp.ndarray) -> bool:
     return True
 
 
-def _check_information(records: _Records, order: str) -> onp.ndarray:
+def _check_information(records: _Records, order: hints.PoseGraphFormat) -> onp.ndarray:
     """The information matrices, else an error at the first one that is not positive
     definite (suggesting the other 2D order where it would give one)."""
     info = _information(records, order)
@@ -267,7 +268,7 @@ def _check_information(records: _Records, order: str) -> onp.ndarray:
         f"symmetric positive definite: {info[row].tolist()}"
     )
     if tag.dim == 2:
-        other = "toro" if order == "g2o" else "g2o"
+        other: hints.PoseGraphFormat = "toro" if order == "g2o" else "g2o"
         if _is_positive_definite(_information(records, other)[row]):
             message += (
                 f"; read in {_NAMES[other]} order it is: pass information_order={other!r}"
@@ -277,128 +278,114 @@ def _check_information(records: _Records, order: str) -> onp.ndarray:
 
 
 # ---------------------------------------------------------------------------------------
-# Rotations and poses, NumPy float64.
+# Rotations and poses: the library's groups, in float64.
+
+
+def _padded(rows: onp.ndarray, fill: Sequence[float]) -> onp.ndarray:
+    """``rows`` ``(m, w)`` followed by copies of ``fill`` up to the next power of two, so
+    that the jitted group operations compile once per size class, not once per file."""
+    m = len(rows)
+    size = 1 << max(0, (m - 1).bit_length())
+    return onp.concatenate(
+        [rows, onp.broadcast_to(onp.asarray(fill, float), (size - m, len(fill)))]
+    )
 
 
 def rpy_to_quaternion(rpy: onp.ndarray) -> onp.ndarray:
     """ZYX Euler angles ``(…, 3)`` (roll, pitch, yaw) to unit quaternions ``(…, 4)``
-    ``(qx, qy, qz, qw)`` of R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    half = 0.5 * onp.asarray(rpy, dtype=onp.float64)
-    cr, cp, cy = onp.cos(half[..., 0]), onp.cos(half[..., 1]), onp.cos(half[..., 2])
-    sr, sp, sy = onp.sin(half[..., 0]), onp.sin(half[..., 1]), onp.sin(half[..., 2])
-    return onp.stack(
-        [
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy,
-        ],
-        axis=-1,
-    )
+    ``(qx, qy, qz, qw)`` of R = Rz(yaw) Ry(pitch) Rx(roll) (``SO3.from_rpy_radians``)."""
+    rpy = onp.asarray(rpy, dtype=onp.float64)
+    flat = rpy.reshape(-1, 3)
+    a = _padded(flat, [0.0, 0.0, 0.0])
+    with x64(True):
+        R = SO3.from_rpy_radians(a[:, 0], a[:, 1], a[:, 2])
+        q = onp.asarray(R.as_quaternion_xyzw(), dtype=onp.float64)
+    return q[: len(flat)].reshape(*rpy.shape[:-1], 4)
 
 
 def quaternion_to_rpy(q: onp.ndarray) -> onp.ndarray:
-    """Quaternions ``(…, 4)`` ``(qx, qy, qz, qw)``, normalised first, to ZYX Euler angles
-    ``(…, 3)`` (roll, pitch, yaw), pitch in [−π/2, π/2].
-
-    Yaw is read off the matrix, and roll and pitch off Rz(yaw)ᵀ R, so that the angles
-    reproduce R to a few ulp also near pitch = ±π/2 (where roll and yaw are not
-    determined separately)."""
+    """Quaternions ``(…, 4)`` ``(qx, qy, qz, qw)`` to ZYX Euler angles ``(…, 3)`` (roll,
+    pitch, yaw), pitch in [−π/2, π/2], by ``SO3.as_rpy_radians``: the angles reproduce R to
+    a few ulp also near pitch = ±π/2, where roll and yaw are not determined separately."""
     q = onp.asarray(q, dtype=onp.float64)
-    x, y, z, w = onp.moveaxis(q / onp.linalg.norm(q, axis=-1, keepdims=True), -1, 0)
-    r00, r01, r02 = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
-    r10, r11, r12 = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
-    r20 = 2 * (x * z - y * w)
-    yaw = onp.arctan2(r10, r00)
-    c, s = onp.cos(yaw), onp.sin(yaw)
-    pitch = onp.arctan2(-r20, c * r00 + s * r10)
-    roll = onp.arctan2(s * r02 - c * r12, c * r11 - s * r01)
-    return onp.stack([roll, pitch, yaw], axis=-1)
+    flat = q.reshape(-1, 4)
+    with x64(True):
+        angles = SO3.from_quaternion_xyzw(_padded(flat, [0.0, 0.0, 0.0, 1.0])).as_rpy_radians()
+        rpy = onp.stack([onp.asarray(a, dtype=onp.float64) for a in angles], axis=-1)
+    return rpy[: len(flat)].reshape(*q.shape[:-1], 3)
 
 
-def _compose2(a: Sequence[float], b: Sequence[float]) -> List[float]:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return [
-        a[0] + c * b[0] - s * b[1],
-        a[1] + s * b[0] + c * b[1],
-        math.remainder(a[2] + b[2], math.tau),
-    ]
-
-
-def _inverse2(a: Sequence[float]) -> List[float]:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return [-(c * a[0] + s * a[1]), s * a[0] - c * a[1], -a[2]]
-
-
-def _rotate(q: Sequence[float], v: Sequence[float]) -> List[float]:
-    """v rotated by the unit quaternion q = (x, y, z, w): v + 2w(u×v) + 2u×(u×v)."""
-    x, y, z, w = q
-    tx = 2 * (y * v[2] - z * v[1])
-    ty = 2 * (z * v[0] - x * v[2])
-    tz = 2 * (x * v[1] - y * v[0])
-    return [
-        v[0] + w * tx + (y * tz - z * ty),
-        v[1] + w * ty + (z * tx - x * tz),
-        v[2] + w * tz + (x * ty - y * tx),
-    ]
-
-
-def _compose3(a: Sequence[float], b: Sequence[float]) -> List[float]:
-    t = _rotate(a[3:], b[:3])
-    x1, y1, z1, w1 = a[3:]
-    x2, y2, z2, w2 = b[3:]
-    return [
-        a[0] + t[0],
-        a[1] + t[1],
-        a[2] + t[2],
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-    ]
-
-
-def _inverse3(a: Sequence[float]) -> List[float]:
-    q = [-a[3], -a[4], -a[5], a[6]]
-    t = _rotate(q, a[:3])
-    return [-t[0], -t[1], -t[2], *q]
+def _spanning_forest(
+    n: int, known: onp.ndarray, edges: onp.ndarray
+) -> Tuple[onp.ndarray, onp.ndarray, onp.ndarray]:
+    """Which edge places each vertex whose pose is not known, taking the edges in order:
+    an edge with one end placed places the other, an edge with neither starts a new tree
+    at the identity on its i (a loop closure, both ends placed, is skipped). Returns, per
+    vertex, the placing edge (−1 for a root: a known vertex or a tree's start), its other
+    end, and whether the edge is read backwards (the vertex is the edge's i)."""
+    placed = known.copy()
+    edge, parent = onp.full(n, -1), onp.full(n, -1)
+    backwards = onp.zeros(n, dtype=bool)
+    for e, (i, j) in enumerate(edges.tolist()):
+        if placed[i] and placed[j]:
+            continue
+        if not placed[i] and not placed[j]:
+            placed[i] = True  # a root at the identity
+        if placed[i]:
+            edge[j], parent[j], placed[j] = e, i, True
+        else:
+            edge[i], parent[i], backwards[i], placed[i] = e, j, True, True
+    assert placed.all(), "every id appears in a vertex or an edge"
+    return edge, parent, backwards
 
 
 def _chain(
     dim: int, poses: onp.ndarray, known: onp.ndarray, edges: onp.ndarray, z: onp.ndarray
 ) -> None:
-    """Fill the unknown rows of ``poses`` in place by composing the edges in order."""
+    """Fill the unknown rows of ``poses`` in place by composing the edges in order
+    (``_spanning_forest``): T_j = T_i Z_ij forwards, T_i = T_j Z_ij⁻¹ backwards, roots
+    kept (known) or at the identity. The compositions along each tree run batched, by
+    pointer jumping: every vertex composes with its ancestor's product and jumps to the
+    ancestor's ancestor, ⌈log₂(depth + 1)⌉ rounds of one group product."""
+    n = len(poses)
+    edge, parent, backwards = _spanning_forest(n, known, edges)
     if dim == 3:  # unit quaternions for composing (the stored measurements keep the file's)
         z = z.copy()
         z[:, 3:] /= onp.linalg.norm(z[:, 3:], axis=1, keepdims=True)
-    compose, inverse = (_compose2, _inverse2) if dim == 2 else (_compose3, _inverse3)
     identity = [0.0] * POSE_WIDTH[dim]
     if dim == 3:
         identity[6] = 1.0
-    rows: List[Optional[List[float]]] = [None] * len(poses)
-    for index in onp.flatnonzero(known).tolist():
-        rows[index] = poses[index].tolist()
-    for (i, j), zij in zip(edges.tolist(), z.tolist()):
-        ti, tj = rows[i], rows[j]
-        if ti is not None and tj is not None:
-            continue
-        if ti is None and tj is None:
-            ti = rows[i] = list(identity)
-        if tj is None:
-            assert ti is not None
-            rows[j] = compose(ti, zij)
-        else:
-            rows[i] = compose(tj, inverse(zij))
-    missing = [index for index, row in enumerate(rows) if row is None]
-    assert not missing, "every id appears in a vertex or an edge"
-    poses[~known] = onp.array([row for row, k in zip(rows, known.tolist()) if not k])
+    rows = poses.copy()
+    rows[(edge < 0) & ~known] = identity
+    # Each vertex's transform from its parent (its own pose at a root), padded with roots.
+    root = _padded((edge < 0)[:, None].astype(float), [1.0])[:, 0] > 0
+    m = len(root)
+    ancestor = onp.concatenate([parent, onp.full(m - n, -1)])
+    with x64(True):
+        Z = to_group(dim, _padded(z[onp.maximum(edge, 0)], identity))
+        G: Any = type(Z)
+        step = onp.where(
+            _padded(backwards[:, None].astype(float), [0.0]) > 0,
+            onp.asarray(Z.inverse().parameters()),
+            onp.asarray(Z.parameters()),
+        )
+        own = onp.asarray(to_group(dim, _padded(rows, identity)).parameters())
+        product = onp.where(root[:, None], own, step)
+        while (ancestor >= 0).any():
+            active = ancestor >= 0
+            up = onp.where(active, ancestor, onp.arange(m))
+            composed = onp.asarray((G(product[up]) @ G(product)).parameters())
+            product = onp.where(active[:, None], composed, product)
+            ancestor = onp.where(active, ancestor[up], -1)
+        chained = from_group(G(product[:n]))
+    poses[~known] = chained[~known]
 
 
 # ---------------------------------------------------------------------------------------
 # The public functions.
 
 
-def read(path: PathLike, *, information_order: Optional[InformationOrder] = None) -> PoseGraph:
+def read(path: PathLike, *, information_order: Optional[hints.PoseGraphFormat] = None) -> PoseGraph:
     """Read a pose graph from a g2o or TORO file, 2D or 3D, the format told by the tags.
 
     The records and conventions are those of this module's description: Zᵢⱼ is the pose
@@ -444,7 +431,7 @@ def read(path: PathLike, *, information_order: Optional[InformationOrder] = None
             ``"{path}: "``: a file without edges. Also where ``information_order`` is
             not None, ``"g2o"`` or ``"toro"``.
     """
-    if information_order not in (None, "g2o", "toro"):
+    if information_order is not None and information_order not in _FORMATS:
         raise ValueError(
             f"read: information_order must be None, 'g2o' or 'toro', got {information_order!r}"
         )
@@ -483,7 +470,10 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
             raise _Error(
                 int(records.lines[row]), f"{name}: an edge from vertex {ij[row, 0]} to itself"
             )
-        order = information_order if (information_order and dim == 2) else tag.format
+        order = cast(
+            hints.PoseGraphFormat,
+            information_order if (information_order and dim == 2) else tag.format,
+        )
         information = _check_information(records, order)
         edges.append((records.lines, ij, _pose_values(records, 2), information))
     if not edges:
@@ -557,7 +547,7 @@ def _tag_at(groups: Dict[str, Tuple[List[int], List[str]]], line: int) -> str:
     return "?"
 
 
-def write(path: PathLike, graph: PoseGraph, *, format: FileFormat = "g2o") -> None:
+def write(path: PathLike, graph: PoseGraph, *, format: hints.PoseGraphFormat = "g2o") -> None:
     """Write a pose graph as a g2o or TORO file: the vertex records, then the edges.
 
     The records and conventions are those of this module's description; ``read`` reads the
@@ -580,7 +570,7 @@ def write(path: PathLike, graph: PoseGraph, *, format: FileFormat = "g2o") -> No
         ValueError: where ``format`` is neither, an information matrix is not exactly
             symmetric, or a value is not finite (the file could not be read back).
     """
-    if format not in ("g2o", "toro"):
+    if format not in _FORMATS:
         raise ValueError(f"write: format must be 'g2o' or 'toro', got {format!r}")
     info = onp.asarray(graph.information, dtype=onp.float64)
     if not onp.array_equal(info, onp.swapaxes(info, -1, -2)):

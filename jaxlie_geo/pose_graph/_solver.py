@@ -10,7 +10,7 @@ import dataclasses
 import functools
 import importlib
 import time
-from typing import Any, Literal, Optional, Sequence, Type
+from typing import Any, Optional, Sequence, Type
 
 import jax
 import jax.numpy as jnp
@@ -18,6 +18,7 @@ import numpy as onp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .. import _least_squares as lsq
+from .. import hints
 from .._xla import x64
 from ._factors import Group, Problem, RobustKernel, cost, linearise, retract
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
@@ -108,10 +109,8 @@ def _problem(
 def solve(
     graph: PoseGraph,
     *,
-    method: Literal["lm", "gn"] = "lm",
-    linear_solver: Literal[
-        "auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg"
-    ] = "auto",
+    method: hints.SolverMethod = "lm",
+    linear_solver: hints.LinearSolver = "auto",
     robust: Optional[RobustKernel] = None,
     anchor_sigma: float = 1e-6,
     max_iterations: int = 100,
