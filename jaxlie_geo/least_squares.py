@@ -197,14 +197,14 @@ def _check(factors: Sequence[Factor], variables: Tuple[Variable, ...]) -> None:
     """Trace-time errors for factors that do not fit the variables."""
     for j, f in enumerate(factors):
         counts = set()
-        for s, idx in zip(f.sets, f.indices):
+        for s, index in zip(f.sets, f.indices):
             if not (isinstance(s, int) and 0 <= s < len(variables)):
                 raise ValueError(
                     f"least_squares: factor {j} names variable set {s!r}; there are "
                     f"{len(variables)} (0 to {len(variables) - 1})"
                 )
-            concrete = not isinstance(idx, jax.core.Tracer)
-            idx = onp.asarray(idx) if concrete else idx
+            concrete = not isinstance(index, jax.core.Tracer)
+            idx: Any = onp.asarray(index) if concrete else index
             if idx.ndim != 1 or not jnp.issubdtype(idx.dtype, jnp.integer):
                 raise ValueError(
                     f"least_squares: factor {j}'s indices must be an int array (F,), got "
@@ -474,7 +474,7 @@ class _HostPattern:
         indices = (unique % size).astype(onp.int64)
         indptr = onp.searchsorted(unique // size, onp.arange(size + 1)).astype(onp.int64)
         columns = onp.repeat(onp.arange(size), onp.diff(indptr))
-        fields = dict(
+        pattern = _HostPattern(
             size=size,
             nnz=len(unique),
             indices=indices,
@@ -485,8 +485,8 @@ class _HostPattern:
             bandwidth=int(onp.max(columns - indices)),
             triu=tuple(triu),
             backend=backend,
+            solver=None,
         )
-        pattern = _HostPattern(**fields, solver=None)
         solver = (
             _sparse.BandedCholesky(pattern, dense=False)  # type: ignore[arg-type]
             if backend == "banded"
