@@ -196,3 +196,15 @@ def test_errors_name_the_problem() -> None:
         ls.solve([], x, method="newton")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="robust must be"):
         ls.Factor(good, (0,), (jnp.array([0]),), robust=("tukey", 1.0))  # type: ignore[arg-type]
+
+
+def test_float32_problem_is_solved_in_float32() -> None:
+    f = ls.Factor(
+        _curve,
+        (0,),
+        (np.zeros(T.shape[0], np.int32),),
+        (jnp.asarray(T, jnp.float32), jnp.asarray(Y, jnp.float32)),
+    )
+    sol = ls.solve([f], (jnp.array([[1.0, 0.0, 0.0]], jnp.float32),))
+    assert sol.variables[0].dtype == jnp.float32 and sol.cost.dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(sol.variables[0][0]), _scipy_fit(Y), rtol=2e-4)
