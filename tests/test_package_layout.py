@@ -1,6 +1,7 @@
-"""The package's import structure: leaf modules import no group code, the import graph has
-no cycle, and no module imports inside a function body to hide one. The benchmarks package
-too has no cycle, and its shared module imports none of the scripts.
+"""The package's import structure: leaf modules import no group code, the import graphs of
+the package and of each subpackage have no cycle, and no module imports inside a function
+body to hide one. The benchmarks package too has no cycle, and its shared modules import
+none of the scripts.
 
 Read from the source with ``ast`` (independent of Python's import machinery, which tolerates
 cycles as long as the names exist when they are read).
@@ -68,7 +69,16 @@ def test_leaf_modules_import_only_leaves() -> None:
         assert not upward, f"{leaf} imports {sorted(upward)}"
 
 
-@pytest.mark.parametrize("folder", [PACKAGE, BENCHMARKS], ids=lambda f: f.name)
+SUBPACKAGES = sorted(p.parent for p in PACKAGE.glob("*/__init__.py"))
+"""The package's subpackages (``splines``, ``pose_graph``): their modules import each other
+too, and must not cycle either."""
+
+
+@pytest.mark.parametrize(
+    "folder",
+    [PACKAGE, *SUBPACKAGES, BENCHMARKS],
+    ids=lambda f: f"jaxlie_geo.{f.name}" if f.parent == PACKAGE else f.name,
+)
 def test_import_graph_has_no_cycle(folder: pathlib.Path) -> None:
     graph = _graph(folder)
     done: Set[str] = set()
@@ -100,7 +110,7 @@ def test_benchmarks_shared_modules_are_leaves() -> None:
 
 
 def test_no_import_inside_a_function() -> None:
-    for path in sorted(PACKAGE.glob("*.py")):
+    for path in sorted(PACKAGE.rglob("*.py")):
         tree = ast.parse(path.read_text(), str(path))
         for fn in ast.walk(tree):
             if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
