@@ -253,6 +253,7 @@ def _factor_residuals(f: Factor, variables: Tuple[Variable, ...]) -> jax.Array:
     return r
 
 
+@jax.jit
 def cost(factors: Sequence[Factor], variables: Tuple[Variable, ...]) -> jax.Array:
     """The cost ½ Σ_f ρ(‖r_f‖²) over every factor, a scalar."""
     total = jnp.zeros((), _dtype(variables))
@@ -867,6 +868,7 @@ def _choose(name: str, factors, variables) -> Tuple[str, Optional[_HostPattern]]
     return "host", _host_pattern(factors, variables, name)
 
 
+@jax.jit
 def marginal_covariances(factors: Sequence[Factor], solution: Solution) -> jax.Array:
     """The Laplace covariance of the solution, (JᵀWJ)⁻¹ at it, as GTSAM's ``Marginals``:
     a dense ``(N, N)`` array in the flat tangent (the sets in order, each set's elements in

@@ -58,13 +58,20 @@ IA = jnp.array([0, 1, 2, 3, 0])
 IB = jnp.array([1, 2, 3, 4, 4])
 
 
-def _graph():
+@jax.jit
+def _graph_parameters():
     truth = jl.SE2.exp(jnp.array([[0.0, 0.0, 0.0], [1, 0.1, 0.3], [2, 0.5, 0.7], [2.5, 1.5, 1.2],
                                   [1.8, 2.2, 2.0]]))  # fmt: skip
     noise = 0.02 * jax.random.normal(jax.random.key(0), (IA.shape[0], 3))
     meas = (truth[IA].inverse() @ truth[IB]) @ jl.SE2.exp(noise)
     init = truth @ jl.SE2.exp(0.1 * jax.random.normal(jax.random.key(1), (N, 3)))
-    return truth, meas, init
+    starts = jl.SE2.exp(init.log()[None] + 0.05 * jax.random.normal(jax.random.key(2), (3, N, 3)))
+    return truth.parameters(), meas.parameters(), init.parameters(), starts.parameters()
+
+
+def _graph():
+    truth, meas, init, starts = _graph_parameters()
+    return jl.SE2(truth), jl.SE2(meas), jl.SE2(init), starts
 
 
 def _between(a, b, z):
@@ -90,47 +97,50 @@ def _solve_graph(meas_params, init_params, anchor_params):
 _solve_graph_jit = jax.jit(_solve_graph)
 
 
+@jax.jit
+def _tangent_gradient(meas_params, anchor_params, x_params):
+    """The gradient of the cost in the right tangent at x, by autodiff (not the solver's
+    normal equations)."""
+    factors = _factors(jl.SE2(meas_params), jl.SE2(anchor_params))
+    x = jl.SE2(x_params)
+    return jax.grad(lambda d: ls.cost(factors, (x @ jl.SE2.exp(d),)))(jnp.zeros((N, 3)))
+
+
 def test_pose_graph_reaches_a_stationary_point_and_vmap_equals_each_alone() -> None:
-    truth, meas, init = _graph()
-    anchor = truth[jnp.array([0])]
-    starts = jl.SE2.exp(
-        init.log()[None] + 0.05 * jax.random.normal(jax.random.key(2), (3, N, 3))
-    ).parameters()
-    batched = jax.vmap(_solve_graph_jit, in_axes=(None, 0, None))(
-        meas.parameters(), starts, anchor.parameters()
-    )
+    truth, meas, init, starts = _graph()
+    anchor = truth[np.array([0])].parameters()
+    batched = jax.vmap(_solve_graph_jit, in_axes=(None, 0, None))(meas.parameters(), starts, anchor)
     for i in range(3):
-        alone = _solve_graph_jit(meas.parameters(), starts[i], anchor.parameters())
+        alone = _solve_graph_jit(meas.parameters(), starts[i], anchor)
         assert bool(alone.converged)
         np.testing.assert_allclose(
             batched.variables[0].parameters()[i], alone.variables[0].parameters(), atol=1e-12
         )
         assert float(alone.cost) < float(alone.initial_cost)
-        # The tangent gradient of the cost vanishes at the solution (autodiff, not the solver's
-        # normal equations).
-        x = alone.variables[0]
-        grad = jax.grad(lambda d, x=x: ls.cost(_factors(meas, anchor), (x @ jl.SE2.exp(d),)))(
-            jnp.zeros((N, 3))
-        )
+        grad = _tangent_gradient(meas.parameters(), anchor, alone.variables[0].parameters())
         assert float(jnp.max(jnp.abs(grad))) < 1e-9
 
 
+@jax.jit
+def _last_position_and_cost(meas_params, init_params, anchor_params):
+    sol = _solve_graph_jit(meas_params, init_params, anchor_params)
+    return jnp.sum(sol.variables[0].translation()[N - 1] ** 2) + sol.cost
+
+
 def test_implicit_derivative_equals_central_differences() -> None:
-    truth, meas, init = _graph()
-    anchor = truth[jnp.array([0])].parameters()
-
-    def loss(meas_params):
-        sol = _solve_graph_jit(meas_params, init.parameters(), anchor)
-        return jnp.sum(sol.variables[0].translation()[N - 1] ** 2) + sol.cost
-
-    p = meas.parameters()
-    g = jax.grad(loss)(p)
+    truth, meas, init, _ = _graph()
+    anchor = truth[np.array([0])].parameters()
+    p, x0 = meas.parameters(), init.parameters()
+    g = jax.jit(jax.grad(_last_position_and_cost))(p, x0, anchor)
     assert bool(jnp.all(jnp.isfinite(g)))
     rng = np.random.default_rng(0)
     for _ in range(2):
         d = jnp.asarray(rng.standard_normal(p.shape))
         h = 1e-6
-        fd = (loss(p + h * d) - loss(p - h * d)) / (2 * h)
+        fd = (
+            _last_position_and_cost(p + h * d, x0, anchor)
+            - _last_position_and_cost(p - h * d, x0, anchor)
+        ) / (2 * h)
         np.testing.assert_allclose(float(jnp.sum(g * d)), float(fd), rtol=1e-6)
 
 
