@@ -804,8 +804,9 @@ def solve(
             the index arrays concrete: close over them). ``"auto"``: dense up to
             ``DENSE_LIMIT`` unknowns, else CHOLMOD or QDLDL when installed and the indices
             are concrete, else PCG.
-        cg_tolerance, cg_max_iterations: PCG's relative residual and iteration limit (also
-            those of the implicit derivative's solve, for every solver but ``"dense"``).
+        cg_tolerance: PCG's relative residual (also that of the implicit derivative's solve,
+            for every solver but ``"dense"``).
+        cg_max_iterations: PCG's iteration limit (the same).
 
     Returns:
         A ``Solution``. Under ``jax.vmap`` (initial values, data and indices batched over
@@ -814,10 +815,10 @@ def solve(
         described in the module docstring.
 
     Raises:
-        ValueError / IndexError at trace time: a set without exactly one batch axis, a
-        factor naming a set that does not exist, indices that are not ``(F,)`` ints or
-        (when concrete) out of range, residuals that are not vectors; ``method`` or an
-        option out of range.
+        ValueError: at trace time, for a set without exactly one batch axis, a factor naming
+            a set that does not exist, indices that are not ``(F,)`` ints, residuals that are
+            not vectors, or ``method`` or an option out of range.
+        IndexError: at trace time, for concrete indices out of range.
     """
     if method not in ("lm", "gn"):
         raise ValueError(f"least_squares.solve: method must be 'lm' or 'gn', got {method!r}")
