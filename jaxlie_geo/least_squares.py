@@ -15,9 +15,11 @@ least-squares estimation of nonlinear parameters*, 1963) or Gauss–Newton, in o
 ``lax.while_loop``, with the damping policy and stopping rules of ``pose_graph.solve``
 (``StopReason``). Steps are right perturbations, X ⊕ δ = X @ exp(δ) for a group element and
 x + δ for an array (``manifold.rplus``); the residuals' Jacobians in those tangents come from
-forward-mode autodiff. The normal equations are dense: (H + λD) δ = −g, H = JᵀJ, by Cholesky,
-which suits problems of up to a few thousand unknowns (a batch of small problems under
-``vmap``, inverse kinematics, calibration, a small pose graph).
+forward-mode autodiff, or from a closed form the factor supplies (``Factor.jacobian``). The
+normal equations (H + λD) δ = −g, H = JᵀJ, are solved by the linear solver ``solve``'s
+``linear_solver`` names: a dense Cholesky for problems of up to a few thousand unknowns (a
+batch of small problems under ``vmap``, inverse kinematics, calibration, a small pose
+graph), conjugate gradients or a sparse Cholesky for larger ones.
 
 The derivative of the solution with respect to every array the residuals read (the factors'
 ``data``) is the implicit function theorem's at the returned point x*: with G(x, θ) the
@@ -115,6 +117,15 @@ class Factor:
         robust: None, or ``("huber", k)`` or ``("cauchy", k)``: ρ(s) = s for s ≤ k², and
             2k√s − k² beyond (Huber), or ρ(s) = k² log(1 + s/k²) (Cauchy), s = ‖r‖².
             Applied by reweighting each factor by √ρ'(s) at the linearisation point.
+        jacobian: None (forward-mode autodiff of ``residual``), or a closed form with
+            ``residual``'s arguments that returns the residual and its Jacobian together,
+            ``(r, J)`` with r ``(r,)`` and J ``(r, K)``: K the sum of the arguments' tangent
+            dimensions, the arguments' columns side by side in argument order, each in the
+            right-perturbation tangent (X ⊕ δ = X @ exp(δ) for a group element, x + δ for a
+            row; ``jaxlie_geo.jacobians``' convention). The linearisation calls it instead
+            of ``residual``; the cost and the implicit derivative (which needs second
+            derivatives) still use ``residual``, so the two must agree. Static, as
+            ``residual``.
     """
 
     residual: Callable[..., jax.Array] = dataclasses.field(metadata=dict(static=True))
@@ -122,10 +133,15 @@ class Factor:
     indices: Tuple[jax.Array, ...]
     data: Any = None
     robust: Robust = dataclasses.field(default=None, metadata=dict(static=True))
+    jacobian: Optional[Callable[..., Tuple[jax.Array, jax.Array]]] = dataclasses.field(
+        default=None, metadata=dict(static=True)
+    )
 
     def __post_init__(self) -> None:
         if not callable(self.residual):
             raise TypeError(f"Factor: residual must be callable, got {type(self.residual)}")
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise TypeError(f"Factor: jacobian must be callable, got {type(self.jacobian)}")
         if len(self.sets) != len(self.indices):
             raise ValueError(f"Factor: {len(self.sets)} sets but {len(self.indices)} index arrays")
         if self.robust is not None and (
@@ -309,6 +325,8 @@ def _linearise(
                 ]
                 return f.residual(*moved) if f.data is None else f.residual(*moved, data)
 
+            if f.jacobian is not None:
+                return f.jacobian(*arg_values) if f.data is None else f.jacobian(*arg_values, data)
             zero = jnp.zeros((sum(dims),), dtype)
             return at(zero), jax.jacfwd(at)(zero)
 
@@ -316,6 +334,11 @@ def _linearise(
         if r.ndim != 2:
             raise ValueError(
                 f"least_squares: a residual must return a vector (r,), got shape {r.shape[1:]}"
+            )
+        if M.shape != (*r.shape, sum(dims)):
+            raise ValueError(
+                f"least_squares: a factor's Jacobian must be (r, K) = {(r.shape[1], sum(dims))}, "
+                f"got {M.shape[1:]}"
             )
         rho, w = _rho(f.robust, jnp.sum(r * r, axis=-1))
         total = total + 0.5 * jnp.sum(rho)
