@@ -207,6 +207,17 @@ def installed(backend: str) -> bool:
     return True
 
 
+def require(backend: str) -> None:
+    """``ImportError`` naming the extra to install, where ``backend``'s package does not
+    import."""
+    if not installed(backend):
+        extra, package = ("cholmod", "cvxopt") if backend == "cholmod" else ("pose-graph", "qdldl")
+        raise ImportError(
+            f"linear_solver={backend!r} needs the {package} package: pip install "
+            f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
+        )
+
+
 class SparseCholesky:
     """(H + λD) δ = −g on the host by CHOLMOD (``backend="cholmod"``, supernodal unless
     ``supernodal=False``) or QDLDL (``"qdldl"``); the symbolic analysis is done once, on the
@@ -217,14 +228,7 @@ class SparseCholesky:
             raise ValueError(
                 f"SparseCholesky: backend must be 'cholmod' or 'qdldl', got {backend!r}"
             )
-        if not installed(backend):
-            extra, package = (
-                ("cholmod", "cvxopt") if backend == "cholmod" else ("pose-graph", "qdldl")
-            )
-            raise ImportError(
-                f"linear_solver={backend!r} needs the {package} package: pip install "
-                f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
-            )
+        require(backend)
         self.backend = backend
         self.supernodal = supernodal
         self.pattern = pattern

@@ -12,10 +12,11 @@ it names (``sets``), at the indices its ``indices`` give, and that factor's slic
 ``solve`` minimises the cost by Levenberg–Marquardt (Levenberg, *A method for the solution of
 certain non-linear problems in least squares*, 1944; Marquardt, *An algorithm for
 least-squares estimation of nonlinear parameters*, 1963) or Gauss–Newton, in one
-``lax.while_loop``, with the damping policy and stopping rules of ``pose_graph.solve``
-(``StopReason``). Steps are right perturbations, X ⊕ δ = X @ exp(δ) for a group element and
-x + δ for an array (``manifold.rplus``); the residuals' Jacobians in those tangents come from
-forward-mode autodiff, or from a closed form the factor supplies (``Factor.jacobian``). The
+``lax.while_loop``, with the damping policy ``solve`` describes and the stopping rules
+``StopReason`` names (``pose_graph.solve`` is one of its users). Steps are right
+perturbations, X ⊕ δ = X @ exp(δ) for a group element and x + δ for an array
+(``manifold.rplus``); the residuals' Jacobians in those tangents come from forward-mode
+autodiff, or from a closed form the factor supplies (``Factor.jacobian``). The
 normal equations (H + λD) δ = −g, H = JᵀJ, are solved by the linear solver ``solve``'s
 ``linear_solver`` names: a dense Cholesky for problems of up to a few thousand unknowns (a
 batch of small problems under ``vmap``, inverse kinematics, calibration, a small pose
@@ -88,6 +89,25 @@ class StopReason(enum.IntEnum):
     STEP_RAISED_COST = 4
     #: Gauss–Newton: the linear system gave a non-finite step (a singular system).
     NON_FINITE_STEP = 5
+
+    @property
+    def description(self) -> str:
+        """The reason in words."""
+        return _DESCRIPTIONS[self]
+
+
+_DESCRIPTIONS = {
+    StopReason.MAX_ITERATIONS: "reached max_iterations",
+    StopReason.DECREASE_BELOW_TOLERANCE: "the relative decrease of the cost fell below tolerance",
+    StopReason.PREDICTED_DECREASE_BELOW_TOLERANCE: (
+        "the linear model predicts a relative decrease below tolerance"
+    ),
+    StopReason.NO_STEP_LOWERS_COST: f"no step lowers the cost (λ > {MAX_DAMPING:g})",
+    StopReason.STEP_RAISED_COST: (
+        "a Gauss–Newton step raised the cost; the previous estimate is kept"
+    ),
+    StopReason.NON_FINITE_STEP: "the linear system gave a non-finite step",
+}
 
 
 _CONVERGED = (
@@ -572,6 +592,7 @@ class _Options:
     cg_tolerance: float
     cg_max_iterations: int
     pattern: Optional[_HostPattern] = None
+    callback: Optional[Callable[..., None]] = None
 
 
 def _system(opts: _Options, factors, variables):
@@ -608,9 +629,42 @@ def _step(opts: _Options, variables, state, g, damping, free) -> jax.Array:
         return _cg(matvec, rhs, precondition, opts.cg_tolerance, opts.cg_max_iterations)
     pattern = opts.pattern
     assert pattern is not None
-    out = jax.ShapeDtypeStruct(g.shape, g.dtype)
-    host = lambda *a: onp.asarray(pattern.solve(*a), g.dtype)  # noqa: E731
-    return jax.pure_callback(host, out, state, damping, g, free, vmap_method="sequential")
+    # float64 travels as its bits both ways (``_as_bits``).
+    out = jax.eval_shape(_as_bits, g)
+
+    def host(values, damping, g, free):
+        delta = pattern.solve(*(_from_bits(onp.asarray(a)) for a in (values, damping, g)), free)
+        delta = onp.asarray(delta, onp.float64 if out.dtype == onp.uint32 else out.dtype)
+        return delta[..., None].view(onp.uint32) if out.dtype == onp.uint32 else delta
+
+    args = (_as_bits(state), _as_bits(damping), _as_bits(g), free)
+    delta = jax.pure_callback(host, out, *args, vmap_method="sequential")
+    return jax.lax.bitcast_convert_type(delta, g.dtype) if delta.dtype != g.dtype else delta
+
+
+@functools.lru_cache(maxsize=None)
+def _report(callback: Callable[..., None]) -> Callable[..., None]:
+    """``callback(iteration, cost, step, damping)`` on the host, at linearisation points
+    only (one wrapper per callback, so that ``jit`` keys on the callback itself)."""
+
+    def at_point(moved, it, values):
+        if bool(moved):
+            c, step, lam = (float(v) for v in _from_bits(onp.asarray(values)))
+            callback(int(it), c, step, lam)
+
+    return at_point
+
+
+def _as_bits(x: jax.Array) -> jax.Array:
+    """float64 as its bits, ``(..., 2)`` uint32, for a host callback: it may run on a thread
+    where x64 is off (a caller's ``jax.experimental.enable_x64`` context is per thread),
+    where JAX would pass, and check, float64 values as float32. Other dtypes as they are."""
+    return jax.lax.bitcast_convert_type(x, jnp.uint32) if x.dtype == jnp.float64 else x
+
+
+def _from_bits(a: onp.ndarray) -> onp.ndarray:
+    """The inverse of ``_as_bits``, on the host."""
+    return onp.ascontiguousarray(a).view(onp.float64)[..., 0] if a.dtype == onp.uint32 else a
 
 
 def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
@@ -635,6 +689,7 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
         nu=jnp.asarray(DAMPING_FACTOR, dtype),
         it=jnp.asarray(0, jnp.int32),
         reason=jnp.asarray(-1, jnp.int32),
+        step=jnp.zeros((), dtype),  # max |δ| of the last accepted step
     )
 
     def body(st):
@@ -644,6 +699,11 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
             lambda: _system(opts, factors, st["x"]),
             lambda: (st["cost"], st["system"], st["g"], st["diag"]),
         )
+        if opts.callback is not None:
+            # Partitioned: under a sharded solve each device calls it (with the same
+            # replicated scalars); one call on one device deadlocks the others' collectives.
+            values = _as_bits(jnp.stack([c, st["step"], st["lam"]]))
+            jax.debug.callback(_report(opts.callback), moved, st["it"], values, partitioned=True)
         # The decrease between the costs at two linearisation points.
         decrease = jnp.where(st["cost"] > 0, (st["cost"] - c) / st["cost"], 0.0)
         converged = moved & (st["it"] > 0) & (decrease < opts.tolerance)
@@ -696,6 +756,7 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
             nu=nu,
             it=st["it"] + go.astype(jnp.int32),
             reason=reason,
+            step=jnp.where(go, jnp.max(jnp.abs(delta), initial=0.0), st["step"]),
         )
 
     st = jax.lax.while_loop(lambda st: st["reason"] < 0, body, st0)
@@ -799,6 +860,7 @@ def solve(
     linear_solver: Literal["auto", "dense", "pcg", "cholmod", "qdldl", "banded"] = "auto",
     cg_tolerance: float = 1e-10,
     cg_max_iterations: int = 2000,
+    callback: Optional[Callable[[int, float, float, float], None]] = None,
 ) -> Solution:
     """Minimise ½ Σ ρ(‖r‖²) over the variables, from their given values.
 
@@ -828,6 +890,12 @@ def solve(
             are concrete, else PCG.
         cg_tolerance, cg_max_iterations: PCG's relative residual and iteration limit (also
             those of the implicit derivative's solve, for every solver but ``"dense"``).
+        callback: None, or ``callback(iteration, cost, step, damping)``, called on the host
+            (``jax.debug.callback``) at the initial point and after every accepted step,
+            with the number of accepted steps so far, the cost there, max |δ| of the step
+            that led there (0 at the start) and λ; for progress lines and timing. Static
+            (``jit`` keys on it); without ``vmap``, once per point in order (with the
+            factors' data sharded over devices, once per device and point).
 
     Returns:
         A ``Solution``. Under ``jax.vmap`` (initial values, data and indices batched over
@@ -868,7 +936,7 @@ def solve(
     kind, pattern = _choose(linear_solver, factors, variables)
     opts = _Options(
         method, max_iterations, float(tolerance), float(initial_damping), bool(diagonal_damping),
-        kind, float(cg_tolerance), int(cg_max_iterations), pattern,
+        kind, float(cg_tolerance), int(cg_max_iterations), pattern, callback,
     )  # fmt: skip
     return _solve(opts, factors, variables, fixed)
 
@@ -887,6 +955,8 @@ def _choose(name: str, factors, variables) -> Tuple[str, Optional[_HostPattern]]
             name = "pcg"
     if name in ("dense", "pcg"):
         return name, None
+    if name in ("cholmod", "qdldl"):
+        _sparse.require(name)
     return "host", _host_pattern(factors, variables, name)
 
 

@@ -1,7 +1,8 @@
-"""Gauss–Newton and Levenberg–Marquardt on a pose graph: the graph as a least-squares
-problem for the shared loop (``jaxlie_geo._least_squares``, where the damping policy is
-described), each step one compiled call traced once per graph size (number of poses and
-edges) and reused by every iteration and every later solve of a graph of that size.
+"""Gauss–Newton and Levenberg–Marquardt on a pose graph: the graph as a problem of
+``jaxlie_geo.least_squares`` (one variable set, the poses; the edges and the anchor as two
+factors with closed-form Jacobians), solved in one compiled loop traced once per graph size
+(number of poses and edges) and linear solver, and reused by every later solve of a graph
+of that size.
 """
 
 from __future__ import annotations
@@ -9,51 +10,57 @@ from __future__ import annotations
 import dataclasses
 import functools
 import importlib
+import math
+import sys
 import time
-from typing import Any, Literal, Optional, Sequence, Type
+from typing import Any, List, Literal, Optional, Sequence, Tuple
 
 import jax
 import jax.numpy as jnp
 import numpy as onp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from .. import _least_squares as lsq
+from .. import _sparse, least_squares
 from .._xla import x64
-from ._factors import Group, Problem, RobustKernel, cost, linearise, retract
+from ._factors import Group, Problem, RobustKernel, factors
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
+
+#: The names ``linear_solver`` accepts.
+LINEAR_SOLVERS = ("auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg")
+
+#: ``"auto"`` takes the banded Cholesky (when neither sparse package is installed) only if
+#: the band holds at most this many times the pattern's stored entries.
+BAND_FILL_LIMIT = 4
 
 
 @dataclasses.dataclass(frozen=True)
-class Solution(lsq.Solution):
-    """What ``solve`` returns: the record of the least-squares loop (``costs``, ``times``,
-    ``iterations``, ``time``, ``stop_reason``, ``converged``; the costs are
-    ½ Σ ρ(‖W r‖²) + the anchor's ½ ‖r_0/σ‖²), and
+class Solution:
+    """What ``solve`` returns.
 
     Attributes:
+        costs: ``(iterations + 1,)``, the cost before the first and after every accepted
+            step: ½ Σ ρ(‖W r‖²) + the anchor's ½ ‖r_0/σ‖².
+        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
+            of the call to its evaluation (the first includes building the problem and, for
+            a new graph size, compiling).
+        iterations: accepted steps.
+        time: wall-clock seconds of the whole call.
+        stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
+        converged: whether it stopped at a minimum: on the tolerance, or with no step
+            lowering the cost at any damping (rather than at the iteration limit or, for
+            Gauss–Newton, on a step that raised the cost or a singular system).
         graph: the input graph with the optimised poses (``graph.poses``), ready to write.
         poses: the optimised poses, a group element of batch ``(N,)``, float64.
     """
 
+    costs: onp.ndarray
+    times: onp.ndarray
+    iterations: int
+    time: float
+    stop_reason: str
+    converged: bool
     graph: PoseGraph
     poses: Group
-
-
-@dataclasses.dataclass(frozen=True)
-class _GraphModel:
-    """The pose graph's cost as a ``_least_squares.Model``: x the poses' parameters
-    ``(N, P)``, the data a ``Problem``."""
-
-    group: Type[Group]
-    robust: Optional[RobustKernel]
-
-    def linearise(self, x: jax.Array, data: Problem):
-        return linearise(self.group, x, data, self.robust)
-
-    def cost(self, x: jax.Array, data: Problem) -> jax.Array:
-        return cost(self.group, x, data, self.robust)
-
-    def retract(self, x: jax.Array, delta: jax.Array) -> jax.Array:
-        return retract(self.group, x, delta)
 
 
 def _problem(
@@ -170,10 +177,19 @@ def solve(
         ValueError: an argument out of range, an information matrix that is not
             positive definite, or a graph that is not connected.
     """
-    lsq.check_options(
-        "solve", method, linear_solver, max_iterations,
-        anchor_sigma=anchor_sigma, tolerance=tolerance, initial_damping=initial_damping,
-    )  # fmt: skip
+    if method not in ("lm", "gn"):
+        raise ValueError(f"solve: method must be 'lm' or 'gn', got {method!r}")
+    if linear_solver not in LINEAR_SOLVERS:
+        names = ", ".join(repr(name) for name in LINEAR_SOLVERS)
+        raise ValueError(f"solve: linear_solver must be one of {names}, got {linear_solver!r}")
+    for name, value in (("anchor_sigma", anchor_sigma), ("tolerance", tolerance),
+                        ("initial_damping", initial_damping)):  # fmt: skip
+        if not (value > 0 and math.isfinite(value)):
+            raise ValueError(f"solve: {name} must be a positive number, got {value!r}")
+    if not (isinstance(max_iterations, int) and max_iterations >= 0):
+        raise ValueError(
+            f"solve: max_iterations must be a non-negative int, got {max_iterations!r}"
+        )
     if graph.num_poses < 2 or graph.num_edges < 1:
         raise ValueError(
             f"solve: a graph needs 2 poses and 1 edge, got {graph.num_poses} and {graph.num_edges}"
@@ -182,21 +198,106 @@ def solve(
         raise ValueError("solve: an edge joins a pose to itself")
     _check_connected(graph)
     start = time.perf_counter()
+    record = _Record(start, progress, max_iterations)
+    solver = _linear_solver(linear_solver, graph)
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, devices)
-        indices = [onp.stack([onp.asarray(p.edge_i), onp.asarray(p.edge_j)], -1), onp.zeros((1, 1))]
-        model = _GraphModel(graph.group, robust)
-        linear = lsq.system(
-            model, p, indices, graph.num_poses, TANGENT_DIM[graph.dim], linear_solver,
-            diagonal_damping, cg_tolerance, cg_max_iterations,
-        )  # fmt: skip
-        poses, record = lsq.minimise(
-            model, poses, p, linear, method=method, max_iterations=max_iterations,
-            tolerance=tolerance, initial_damping=initial_damping, progress=progress, start=start,
-        )  # fmt: skip
-        T = graph.group(jax.device_get(poses))
-    fields = {f.name: getattr(record, f.name) for f in dataclasses.fields(record)}
-    return Solution(**fields, graph=graph.with_poses(from_group(T)), poses=T)
+        G = graph.group
+        _RECORDS.append(record)
+        try:
+            sol = least_squares.solve(
+                factors(G, p, robust), (G(poses),), method=method,
+                max_iterations=max_iterations, tolerance=tolerance,
+                initial_damping=initial_damping, diagonal_damping=diagonal_damping,
+                linear_solver=solver,
+                cg_tolerance=cg_tolerance, cg_max_iterations=cg_max_iterations,
+                callback=_record,
+            )  # fmt: skip
+            sol = jax.block_until_ready(sol)  # every callback has run
+        finally:
+            _RECORDS.pop()
+        T = G(jax.device_get(sol.variables[0].parameters()))
+        iterations = int(sol.iterations)
+    reason = least_squares.StopReason(int(sol.stop_reason))
+    record.close(reason.description)
+    costs, times = record.arrays(iterations)
+    return Solution(
+        costs=costs,
+        times=times,
+        iterations=iterations,
+        time=time.perf_counter() - start,
+        stop_reason=reason.description,
+        converged=bool(sol.converged),
+        graph=graph.with_poses(from_group(T)),
+        poses=T,
+    )
+
+
+def _linear_solver(name: str, graph: PoseGraph) -> str:
+    """``least_squares.solve``'s name for ``name``: ``"cholesky"`` is CHOLMOD if cvxopt
+    imports, else QDLDL; ``"auto"`` is ``"cholesky"`` if either imports, else the banded
+    Cholesky if H's band is narrow (at most ``BAND_FILL_LIMIT`` times its stored entries),
+    else PCG."""
+    if name == "auto":
+        if _sparse.installed("cholmod") or _sparse.installed("qdldl"):
+            name = "cholesky"
+        else:
+            k, n = TANGENT_DIM[graph.dim], graph.num_poses
+            i, j = onp.sort(graph.edges, axis=1).T
+            pairs = onp.unique(i * n + j).size
+            bandwidth = int(onp.max(j - i)) * k + k - 1
+            nnz = n * k * (k + 1) // 2 + pairs * k * k
+            name = "banded" if (bandwidth + 1) * n * k <= BAND_FILL_LIMIT * nnz else "pcg"
+    if name == "cholesky":
+        name = "cholmod" if _sparse.installed("cholmod") else "qdldl"
+    return name
+
+
+class _Record:
+    """The costs and times of one solve, from ``least_squares.solve``'s callback, and its
+    progress line on stderr: iteration, cost, step size, λ and time; redrawn in place on a
+    terminal, one line per iteration otherwise."""
+
+    def __init__(self, start: float, progress: bool, max_iterations: int):
+        self.start, self.progress, self.max_iterations = start, progress, max_iterations
+        self.tty = progress and sys.stderr.isatty()
+        self.points: dict = {}
+
+    def add(self, it: int, cost: float, step: float, lam: float) -> None:
+        if it in self.points:  # sharded: every device reports each point
+            return
+        seconds = time.perf_counter() - self.start
+        self.points[it] = (cost, seconds)
+        if not self.progress:
+            return
+        width = 20
+        filled = min(width, round(width * it / max(self.max_iterations, 1)))
+        line = (
+            f"[{'#' * filled}{'.' * (width - filled)}] iteration {it:4d}  cost {cost:.9e}  "
+            f"step {step:.2e}  λ {lam:.1e}  {seconds:7.2f} s"
+        )
+        sys.stderr.write(("\r" + line) if self.tty else (line + "\n"))
+        sys.stderr.flush()
+
+    def close(self, reason: str) -> None:
+        if self.progress:
+            sys.stderr.write(("\n" if self.tty else "") + f"stopped: {reason}\n")
+            sys.stderr.flush()
+
+    def arrays(self, iterations: int) -> Tuple[onp.ndarray, onp.ndarray]:
+        """``(costs, times)``, one entry per linearisation point 0..iterations."""
+        rows = [self.points[it] for it in range(iterations + 1)]
+        return onp.asarray([c for c, _ in rows]), onp.asarray([t for _, t in rows])
+
+
+#: The records of the solves in progress; the callback writes to the innermost.
+_RECORDS: List[_Record] = []
+
+
+def _record(it: int, cost: float, step: float, lam: float) -> None:
+    """The callback ``solve`` hands to ``least_squares.solve``: one function for every
+    solve, so that the compiled loop is reused; it writes to the current record."""
+    _RECORDS[-1].add(it, cost, step, lam)
 
 
 def _check_connected(graph: PoseGraph) -> None:
@@ -223,9 +324,9 @@ def graph_cost(
     itself, so it adds 0): ½ Σ ρ(‖Wᵢⱼ rᵢⱼ‖²), float64."""
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, None)
-        return float(_cost_jit(graph.group, robust, poses, p))
+        return float(_cost_jit(robust, graph.group(poses), p))
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
-def _cost_jit(G, robust, poses, p):
-    return cost(G, poses, p, robust)
+@functools.partial(jax.jit, static_argnums=(0,))
+def _cost_jit(robust, poses, p):
+    return least_squares.cost(factors(type(poses), p, robust), (poses,))
