@@ -22,7 +22,7 @@ BENCHMARKS = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 
 LEAVES = {
     "hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_projection", "_sparse",
-    "_least_squares",
+    "_record",
 }  # fmt: skip
 """Modules with no knowledge of the group classes: the base imports them, never the reverse."""
 

@@ -10,10 +10,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import importlib
-import math
-import sys
 import time
-from typing import Any, List, Literal, Optional, Sequence, Tuple
+from typing import Any, Literal, Optional, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -21,12 +19,10 @@ import numpy as onp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .. import _sparse, least_squares
+from .._record import Record, callback, check_options, recording
 from .._xla import x64
 from ._factors import Group, Problem, RobustKernel, factors
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
-
-#: The names ``linear_solver`` accepts.
-LINEAR_SOLVERS = ("auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg")
 
 #: ``"auto"`` takes the banded Cholesky (when neither sparse package is installed) only if
 #: the band holds at most this many times the pattern's stored entries.
@@ -177,19 +173,10 @@ def solve(
         ValueError: an argument out of range, an information matrix that is not
             positive definite, or a graph that is not connected.
     """
-    if method not in ("lm", "gn"):
-        raise ValueError(f"solve: method must be 'lm' or 'gn', got {method!r}")
-    if linear_solver not in LINEAR_SOLVERS:
-        names = ", ".join(repr(name) for name in LINEAR_SOLVERS)
-        raise ValueError(f"solve: linear_solver must be one of {names}, got {linear_solver!r}")
-    for name, value in (("anchor_sigma", anchor_sigma), ("tolerance", tolerance),
-                        ("initial_damping", initial_damping)):  # fmt: skip
-        if not (value > 0 and math.isfinite(value)):
-            raise ValueError(f"solve: {name} must be a positive number, got {value!r}")
-    if not (isinstance(max_iterations, int) and max_iterations >= 0):
-        raise ValueError(
-            f"solve: max_iterations must be a non-negative int, got {max_iterations!r}"
-        )
+    check_options(
+        "solve", method, linear_solver, max_iterations,
+        anchor_sigma=anchor_sigma, tolerance=tolerance, initial_damping=initial_damping,
+    )  # fmt: skip
     if graph.num_poses < 2 or graph.num_edges < 1:
         raise ValueError(
             f"solve: a graph needs 2 poses and 1 edge, got {graph.num_poses} and {graph.num_edges}"
@@ -198,24 +185,21 @@ def solve(
         raise ValueError("solve: an edge joins a pose to itself")
     _check_connected(graph)
     start = time.perf_counter()
-    record = _Record(start, progress, max_iterations)
+    record = Record(start, progress, max_iterations)
     solver = _linear_solver(linear_solver, graph)
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, devices)
         G = graph.group
-        _RECORDS.append(record)
-        try:
+        with recording(record):
             sol = least_squares.solve(
                 factors(G, p, robust), (G(poses),), method=method,
                 max_iterations=max_iterations, tolerance=tolerance,
                 initial_damping=initial_damping, diagonal_damping=diagonal_damping,
                 linear_solver=solver,
                 cg_tolerance=cg_tolerance, cg_max_iterations=cg_max_iterations,
-                callback=_record,
+                callback=callback,
             )  # fmt: skip
             sol = jax.block_until_ready(sol)  # every callback has run
-        finally:
-            _RECORDS.pop()
         T = G(jax.device_get(sol.variables[0].parameters()))
         iterations = int(sol.iterations)
     reason = least_squares.StopReason(int(sol.stop_reason))
@@ -251,53 +235,6 @@ def _linear_solver(name: str, graph: PoseGraph) -> str:
     if name == "cholesky":
         name = "cholmod" if _sparse.installed("cholmod") else "qdldl"
     return name
-
-
-class _Record:
-    """The costs and times of one solve, from ``least_squares.solve``'s callback, and its
-    progress line on stderr: iteration, cost, step size, λ and time; redrawn in place on a
-    terminal, one line per iteration otherwise."""
-
-    def __init__(self, start: float, progress: bool, max_iterations: int):
-        self.start, self.progress, self.max_iterations = start, progress, max_iterations
-        self.tty = progress and sys.stderr.isatty()
-        self.points: dict = {}
-
-    def add(self, it: int, cost: float, step: float, lam: float) -> None:
-        if it in self.points:  # sharded: every device reports each point
-            return
-        seconds = time.perf_counter() - self.start
-        self.points[it] = (cost, seconds)
-        if not self.progress:
-            return
-        width = 20
-        filled = min(width, round(width * it / max(self.max_iterations, 1)))
-        line = (
-            f"[{'#' * filled}{'.' * (width - filled)}] iteration {it:4d}  cost {cost:.9e}  "
-            f"step {step:.2e}  λ {lam:.1e}  {seconds:7.2f} s"
-        )
-        sys.stderr.write(("\r" + line) if self.tty else (line + "\n"))
-        sys.stderr.flush()
-
-    def close(self, reason: str) -> None:
-        if self.progress:
-            sys.stderr.write(("\n" if self.tty else "") + f"stopped: {reason}\n")
-            sys.stderr.flush()
-
-    def arrays(self, iterations: int) -> Tuple[onp.ndarray, onp.ndarray]:
-        """``(costs, times)``, one entry per linearisation point 0..iterations."""
-        rows = [self.points[it] for it in range(iterations + 1)]
-        return onp.asarray([c for c, _ in rows]), onp.asarray([t for _, t in rows])
-
-
-#: The records of the solves in progress; the callback writes to the innermost.
-_RECORDS: List[_Record] = []
-
-
-def _record(it: int, cost: float, step: float, lam: float) -> None:
-    """The callback ``solve`` hands to ``least_squares.solve``: one function for every
-    solve, so that the compiled loop is reused; it writes to the current record."""
-    _RECORDS[-1].add(it, cost, step, lam)
 
 
 def _check_connected(graph: PoseGraph) -> None:
