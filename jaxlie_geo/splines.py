@@ -559,6 +559,13 @@ class _Sample:
         return s * r, s[:, None] * jnp.concatenate(list(J), axis=-1)
 
 
+@functools.lru_cache(maxsize=None)
+def _sample(degree: int, dt: Union[int, float]) -> _Sample:
+    """One ``_Sample`` per degree and knot spacing: ``jit`` keys the loop on the residual
+    and on its bound ``jacobian``, which compare by the instance's identity."""
+    return _Sample(degree, dt)
+
+
 def fit(
     times: hints.Array,
     poses: GroupT,
@@ -653,7 +660,7 @@ def fit(
             f"{w_np.shape}."
         )
     w = jnp.asarray(onp.broadcast_to(w_np.reshape(N, -1), (N, k)), dtype)
-    sample = _Sample(degree, dt)
+    sample = _sample(degree, dt)
     first = onp.asarray(where.segment)
     factor = least_squares.Factor(
         sample,
