@@ -495,6 +495,7 @@ class _HostPattern:
     diagonal: onp.ndarray
     bandwidth: int
     triu: Tuple[Tuple[onp.ndarray, onp.ndarray], ...]
+    segments: Tuple[Optional[onp.ndarray], ...]
     backend: str
     solver: Any = dataclasses.field(compare=False, hash=False)
 
@@ -503,8 +504,14 @@ class _HostPattern:
 
     @staticmethod
     def build(cols: Sequence[onp.ndarray], size: int, backend: str) -> "_HostPattern":
-        rows_all, cols_all, triu = [], [], []
+        rows_all, cols_all, triu, segments = [], [], [], []
         for c in cols:
+            # Factors on the same columns (a spline's samples in one segment) are summed on
+            # the device first: the host's work grows with the distinct column tuples.
+            unique_cols, ids = onp.unique(c, axis=0, return_inverse=True)
+            repeats = len(unique_cols) < len(c)
+            segments.append(ids.ravel().astype(onp.int32) if repeats else None)
+            c = unique_cols if repeats else c
             p, q = onp.triu_indices(c.shape[1])
             r, cc = c[:, p], c[:, q]
             rows_all.append(onp.minimum(r, cc).ravel())
@@ -527,6 +534,7 @@ class _HostPattern:
             diagonal=inverse[len(row) :].astype(onp.int64),
             bandwidth=int(onp.max(columns - indices)),
             triu=tuple(triu),
+            segments=tuple(segments),
             backend=backend,
         )
         pattern = _HostPattern(**fields, solver=None)
@@ -607,11 +615,13 @@ def _system(opts: _Options, factors, variables):
     if opts.linear_solver == "pcg":
         return c, (blocks, D), g, _flat_diagonal(D)
     assert opts.pattern is not None
-    values = jnp.concatenate(
-        [jnp.einsum("frk,frl->fkl", b.M, b.M)[:, p, q].ravel() for b, (p, q) in
-         zip(blocks, opts.pattern.triu)]
-    )  # fmt: skip
-    return c, values, g, _flat_diagonal(D)
+    parts = []
+    for b, (p, q), ids in zip(blocks, opts.pattern.triu, opts.pattern.segments):
+        v = jnp.einsum("frk,frl->fkl", b.M, b.M)
+        if ids is not None:
+            v = jax.ops.segment_sum(v, jnp.asarray(ids), num_segments=int(ids.max()) + 1)
+        parts.append(v[:, p, q].ravel())
+    return c, jnp.concatenate(parts), g, _flat_diagonal(D)
 
 
 def _step(opts: _Options, variables, state, g, damping, free) -> jax.Array:
