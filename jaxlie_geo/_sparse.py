@@ -8,7 +8,7 @@ block at (u, v) for every pair of variables that share a factor, and g = Σ_f A_
 A pose graph's edges are factors on two poses and its anchor one on the first; a spline's
 samples are factors on the ``degree + 1`` control points that shape them.
 
-Four ways to solve, all but the last on the host:
+The host solvers, and the device one ``least_squares`` adds:
 
 - **Sparse Cholesky.** The per-factor blocks are summed into the upper triangle of H in
   compressed-column form, through a scatter map built once per problem (its pattern never
@@ -28,111 +28,21 @@ Four ways to solve, all but the last on the host:
   diagonals; O(size · bandwidth²) time and O(size · bandwidth) memory. Right when the
   variables' order keeps H narrow, as a spline's does (bandwidth (degree + 1)·k).
 - **Dense Cholesky**: LAPACK's ``potrf`` on all of H, O(size³): for small problems.
-- **Preconditioned conjugate gradients** (``jax.scipy.sparse.linalg.cg``) on any device,
-  matrix-free: H x = Σ_f A_fᵀ(A_f x), which shards across devices with the factors. The
-  preconditioner is block Jacobi: the inverse of H's k × k diagonal blocks.
+- **Preconditioned conjugate gradients** on any device, matrix-free, in
+  ``least_squares``.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Any, NamedTuple, Optional, Sequence
+from typing import Any, Optional, Sequence
 
-import jax
-import jax.numpy as jnp
 import numpy as onp
-
-from ._xla import matmul
-
-#: Damping D = diag(H), clipped below to this so that a direction the data do not
-#: constrain is still damped (as in Ceres Solver's Levenberg–Marquardt strategy).
-DAMPING_FLOOR = 1e-6
-
-
-class Factors(NamedTuple):
-    """F factors of m variables each (a pytree).
-
-    Attributes:
-        variables: ``(F, m)`` int32, the variables of each factor, distinct within a factor.
-        e: ``(F, r)``, the whitened residuals.
-        A: ``(F, m, r, k)``, the whitened Jacobian blocks, A[f, a] = ∂e_f/∂δ_variables[f, a].
-    """
-
-    variables: jax.Array
-    e: jax.Array
-    A: jax.Array
-
-
-def _flat(A: jax.Array) -> jax.Array:
-    """The blocks of each factor side by side, ``(F, r, m·k)``."""
-    F, m, r, k = A.shape
-    return jnp.moveaxis(A, 1, 2).reshape(F, r, m * k)
-
-
-def _scatter(values: jax.Array, index: jax.Array, n: int) -> jax.Array:
-    """Σ over factors and their variables of ``values`` ``(F, m, ...)`` at ``index``:
-    ``(n, ...)``."""
-    return jax.ops.segment_sum(values.reshape((-1,) + values.shape[2:]), index.ravel(), n)
-
-
-def _sum(parts: Sequence[jax.Array]) -> jax.Array:
-    out = parts[0]
-    for part in parts[1:]:
-        out = out + part
-    return out
-
-
-def gradient(factors: Sequence[Factors], n: int) -> jax.Array:
-    """g = Σ_f A_fᵀ e_f, ``(n, k)``."""
-    parts = []
-    for fs in factors:
-        F, m, r, k = fs.A.shape
-        Ate = matmul(jnp.swapaxes(_flat(fs.A), -1, -2), fs.e[..., None])[..., 0]
-        parts.append(_scatter(Ate.reshape(F, m, k), fs.variables, n))
-    return _sum(parts)
-
-
-def diagonal_blocks(factors: Sequence[Factors], n: int) -> jax.Array:
-    """H's diagonal blocks Σ_f A_f,aᵀ A_f,a, ``(n, k, k)``."""
-    blocks = [(matmul(jnp.swapaxes(fs.A, -1, -2), fs.A), fs.variables) for fs in factors]
-    return _sum([_scatter(AtA, variables, n) for AtA, variables in blocks])
-
-
-def hessian_values(
-    factors: Sequence[Factors],
-    segment_ids: Sequence[Optional[jax.Array]],
-    segment_counts: Sequence[int],
-) -> jax.Array:
-    """Every factor's contribution to H in the order ``BlockPattern`` expects: per factor
-    the upper triangle of A_fᵀ A_f ``(m·k, m·k)`` in row-major order. Where a factor set's
-    variable tuples repeat (``segment_ids[s]`` not ``None``: the id of each factor's tuple,
-    ``segment_counts[s]`` of them), the factors of one tuple are summed first. Flat."""
-    out = []
-    for fs, ids, count in zip(factors, segment_ids, segment_counts):
-        M = _flat(fs.A)
-        iu = onp.triu_indices(M.shape[-1])
-        values = matmul(jnp.swapaxes(M, -1, -2), M)[:, iu[0], iu[1]]
-        if ids is not None:
-            values = jax.ops.segment_sum(values, ids, count)
-        out.append(values.ravel())
-    return jnp.concatenate(out)
-
-
-def matvec(factors: Sequence[Factors], x: jax.Array) -> jax.Array:
-    """H x = Σ_f A_fᵀ (A_f x_f) for x ``(n, k)``."""
-    parts = []
-    for fs in factors:
-        F, m, r, k = fs.A.shape
-        M = _flat(fs.A)
-        u = matmul(M, x[fs.variables].reshape(F, m * k, 1))
-        Mtu = matmul(jnp.swapaxes(M, -1, -2), u).reshape(F, m, k)
-        parts.append(_scatter(Mtu, fs.variables, x.shape[0]))
-    return _sum(parts)
 
 
 class BlockPattern:
-    """The upper triangle of H in compressed-column form, and the map that sums the values
-    of ``hessian_values`` into it (one ``numpy.bincount``), built once per problem.
+    """The upper triangle of H in compressed-column form, and the map that sums the factors'
+    blocks' upper-triangle values into it (one ``numpy.bincount``), built once per problem.
 
     Arguments:
         indices: per factor set, the host array ``(F, m)`` of its factors' variables.
@@ -143,11 +53,11 @@ class BlockPattern:
         size, nnz: n·k and the number of stored (upper-triangle) entries.
         indices, indptr, columns: the compressed-column pattern (row of every entry, start
             of every column, column of every entry).
-        scatter, diagonal: where each value of ``hessian_values`` and each diagonal entry
-            sits among the ``nnz``.
+        scatter, diagonal: where each block value (of every distinct variable tuple) and
+            each diagonal entry sits among the ``nnz``.
         segment_ids, segment_counts: per factor set, the id of each factor's variable tuple
             and the number of distinct tuples where tuples repeat (``None`` and F where
-            they do not): ``hessian_values``' arguments.
+            they do not).
         bandwidth: the largest column − row of a stored entry.
     """
 
@@ -207,6 +117,17 @@ def installed(backend: str) -> bool:
     return True
 
 
+def require(backend: str) -> None:
+    """``ImportError`` naming the extra to install, where ``backend``'s package does not
+    import."""
+    if not installed(backend):
+        extra, package = ("cholmod", "cvxopt") if backend == "cholmod" else ("pose-graph", "qdldl")
+        raise ImportError(
+            f"linear_solver={backend!r} needs the {package} package: pip install "
+            f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
+        )
+
+
 class SparseCholesky:
     """(H + λD) δ = −g on the host by CHOLMOD (``backend="cholmod"``, supernodal unless
     ``supernodal=False``) or QDLDL (``"qdldl"``); the symbolic analysis is done once, on the
@@ -217,14 +138,7 @@ class SparseCholesky:
             raise ValueError(
                 f"SparseCholesky: backend must be 'cholmod' or 'qdldl', got {backend!r}"
             )
-        if not installed(backend):
-            extra, package = (
-                ("cholmod", "cvxopt") if backend == "cholmod" else ("pose-graph", "qdldl")
-            )
-            raise ImportError(
-                f"linear_solver={backend!r} needs the {package} package: pip install "
-                f"'jaxlie_geo[{extra}]', or use linear_solver='pcg'."
-            )
+        require(backend)
         self.backend = backend
         self.supernodal = supernodal
         self.pattern = pattern
@@ -308,27 +222,3 @@ class BandedCholesky:
             return la.cho_solve_banded((la.cholesky_banded(H, check_finite=False), False), -g)
         except la.LinAlgError:
             return onp.full(self.pattern.size, onp.nan)
-
-
-def pcg(
-    factors: Sequence[Factors],
-    g: jax.Array,
-    D: jax.Array,
-    damping: jax.Array,
-    tolerance: float,
-    max_iterations: int,
-) -> jax.Array:
-    """δ ``(n, k)`` solving (H + diag(damping)) δ = −g by conjugate gradients with the
-    block-Jacobi preconditioner (D + diag(damping))⁻¹, D ``(n, k, k)`` the diagonal blocks
-    of H."""
-    k = g.shape[-1]
-    blocks = D + damping[..., None] * jnp.eye(k, dtype=D.dtype)
-    inverse = jnp.linalg.inv(blocks)
-    delta, _ = jax.scipy.sparse.linalg.cg(
-        lambda x: matvec(factors, x) + damping * x,
-        -g,
-        tol=tolerance,
-        maxiter=max_iterations,
-        M=lambda r: matmul(inverse, r[..., None])[..., 0],
-    )
-    return delta

@@ -12,12 +12,15 @@ it names (``sets``), at the indices its ``indices`` give, and that factor's slic
 ``solve`` minimises the cost by Levenberg–Marquardt (Levenberg, *A method for the solution of
 certain non-linear problems in least squares*, 1944; Marquardt, *An algorithm for
 least-squares estimation of nonlinear parameters*, 1963) or Gauss–Newton, in one
-``lax.while_loop``, with the damping policy and stopping rules of ``pose_graph.solve``
-(``StopReason``). Steps are right perturbations, X ⊕ δ = X @ exp(δ) for a group element and
-x + δ for an array (``manifold.rplus``); the residuals' Jacobians in those tangents come from
-forward-mode autodiff. The normal equations are dense: (H + λD) δ = −g, H = JᵀJ, by Cholesky,
-which suits problems of up to a few thousand unknowns (a batch of small problems under
-``vmap``, inverse kinematics, calibration, a small pose graph).
+``lax.while_loop``, with the damping policy ``solve`` describes and the stopping rules
+``StopReason`` names (``pose_graph.solve`` is one of its users). Steps are right
+perturbations, X ⊕ δ = X @ exp(δ) for a group element and x + δ for an array
+(``manifold.rplus``); the residuals' Jacobians in those tangents come from forward-mode
+autodiff, or from a closed form the factor supplies (``Factor.jacobian``). The
+normal equations (H + λD) δ = −g, H = JᵀJ, are solved by the linear solver ``solve``'s
+``linear_solver`` names: a dense Cholesky for problems of up to a few thousand unknowns (a
+batch of small problems under ``vmap``, inverse kinematics, calibration, a small pose
+graph), conjugate gradients or a sparse Cholesky for larger ones.
 
 The derivative of the solution with respect to every array the residuals read (the factors'
 ``data``) is the implicit function theorem's at the returned point x*: with G(x, θ) the
@@ -35,13 +38,14 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
+import typing
 from typing import Any, Callable, Literal, NamedTuple, Optional, Sequence, Tuple, Union
 
 import jax
 import jax.numpy as jnp
 import numpy as onp
 
-from . import _sparse
+from . import _sparse, hints
 from ._base import MatrixLieGroup
 
 __all__ = [
@@ -87,6 +91,25 @@ class StopReason(enum.IntEnum):
     #: Gauss–Newton: the linear system gave a non-finite step (a singular system).
     NON_FINITE_STEP = 5
 
+    @property
+    def description(self) -> str:
+        """The reason in words."""
+        return _DESCRIPTIONS[self]
+
+
+_DESCRIPTIONS = {
+    StopReason.MAX_ITERATIONS: "reached max_iterations",
+    StopReason.DECREASE_BELOW_TOLERANCE: "the relative decrease of the cost fell below tolerance",
+    StopReason.PREDICTED_DECREASE_BELOW_TOLERANCE: (
+        "the linear model predicts a relative decrease below tolerance"
+    ),
+    StopReason.NO_STEP_LOWERS_COST: f"no step lowers the cost (λ > {MAX_DAMPING:g})",
+    StopReason.STEP_RAISED_COST: (
+        "a Gauss–Newton step raised the cost; the previous estimate is kept"
+    ),
+    StopReason.NON_FINITE_STEP: "the linear system gave a non-finite step",
+}
+
 
 _CONVERGED = (
     StopReason.DECREASE_BELOW_TOLERANCE,
@@ -115,6 +138,15 @@ class Factor:
         robust: None, or ``("huber", k)`` or ``("cauchy", k)``: ρ(s) = s for s ≤ k², and
             2k√s − k² beyond (Huber), or ρ(s) = k² log(1 + s/k²) (Cauchy), s = ‖r‖².
             Applied by reweighting each factor by √ρ'(s) at the linearisation point.
+        jacobian: None (forward-mode autodiff of ``residual``), or a closed form with
+            ``residual``'s arguments that returns the residual and its Jacobian together,
+            ``(r, J)`` with r ``(r,)`` and J ``(r, K)``: K the sum of the arguments' tangent
+            dimensions, the arguments' columns side by side in argument order, each in the
+            right-perturbation tangent (X ⊕ δ = X @ exp(δ) for a group element, x + δ for a
+            row; ``jaxlie_geo.jacobians``' convention). The linearisation calls it instead
+            of ``residual``; the cost and the implicit derivative (which needs second
+            derivatives) still use ``residual``, so the two must agree. Static, as
+            ``residual``.
     """
 
     residual: Callable[..., jax.Array] = dataclasses.field(metadata=dict(static=True))
@@ -122,10 +154,15 @@ class Factor:
     indices: Tuple[jax.Array, ...]
     data: Any = None
     robust: Robust = dataclasses.field(default=None, metadata=dict(static=True))
+    jacobian: Optional[Callable[..., Tuple[jax.Array, jax.Array]]] = dataclasses.field(
+        default=None, metadata=dict(static=True)
+    )
 
     def __post_init__(self) -> None:
         if not callable(self.residual):
             raise TypeError(f"Factor: residual must be callable, got {type(self.residual)}")
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise TypeError(f"Factor: jacobian must be callable, got {type(self.jacobian)}")
         if len(self.sets) != len(self.indices):
             raise ValueError(f"Factor: {len(self.sets)} sets but {len(self.indices)} index arrays")
         if self.robust is not None and (
@@ -310,6 +347,8 @@ def _linearise(
                 ]
                 return f.residual(*moved) if f.data is None else f.residual(*moved, data)
 
+            if f.jacobian is not None:
+                return f.jacobian(*arg_values) if f.data is None else f.jacobian(*arg_values, data)
             zero = jnp.zeros((sum(dims),), dtype)
             return at(zero), jax.jacfwd(at)(zero)
 
@@ -317,6 +356,11 @@ def _linearise(
         if r.ndim != 2:
             raise ValueError(
                 f"least_squares: a residual must return a vector (r,), got shape {r.shape[1:]}"
+            )
+        if M.shape != (*r.shape, sum(dims)):
+            raise ValueError(
+                f"least_squares: a factor's Jacobian must be (r, K) = {(r.shape[1], sum(dims))}, "
+                f"got {M.shape[1:]}"
             )
         rho, w = _rho(f.robust, jnp.sum(r * r, axis=-1))
         total = total + 0.5 * jnp.sum(rho)
@@ -453,6 +497,7 @@ class _HostPattern:
     diagonal: onp.ndarray
     bandwidth: int
     triu: Tuple[Tuple[onp.ndarray, onp.ndarray], ...]
+    segments: Tuple[Optional[onp.ndarray], ...]
     backend: str
     solver: Any = dataclasses.field(compare=False, hash=False)
 
@@ -461,8 +506,14 @@ class _HostPattern:
 
     @staticmethod
     def build(cols: Sequence[onp.ndarray], size: int, backend: str) -> "_HostPattern":
-        rows_all, cols_all, triu = [], [], []
+        rows_all, cols_all, triu, segments = [], [], [], []
         for c in cols:
+            # Factors on the same columns (a spline's samples in one segment) are summed on
+            # the device first: the host's work grows with the distinct column tuples.
+            unique_cols, ids = onp.unique(c, axis=0, return_inverse=True)
+            repeats = len(unique_cols) < len(c)
+            segments.append(ids.ravel().astype(onp.int32) if repeats else None)
+            c = unique_cols if repeats else c
             p, q = onp.triu_indices(c.shape[1])
             r, cc = c[:, p], c[:, q]
             rows_all.append(onp.minimum(r, cc).ravel())
@@ -485,6 +536,7 @@ class _HostPattern:
             diagonal=inverse[len(row) :].astype(onp.int64),
             bandwidth=int(onp.max(columns - indices)),
             triu=tuple(triu),
+            segments=tuple(segments),
             backend=backend,
             solver=None,
         )
@@ -550,6 +602,7 @@ class _Options:
     cg_tolerance: float
     cg_max_iterations: int
     pattern: Optional[_HostPattern] = None
+    callback: Optional[Callable[..., None]] = None
 
 
 def _system(opts: _Options, factors, variables):
@@ -564,11 +617,13 @@ def _system(opts: _Options, factors, variables):
     if opts.linear_solver == "pcg":
         return c, (blocks, D), g, _flat_diagonal(D)
     assert opts.pattern is not None
-    values = jnp.concatenate(
-        [jnp.einsum("frk,frl->fkl", b.M, b.M)[:, p, q].ravel() for b, (p, q) in
-         zip(blocks, opts.pattern.triu)]
-    )  # fmt: skip
-    return c, values, g, _flat_diagonal(D)
+    parts = []
+    for b, (p, q), ids in zip(blocks, opts.pattern.triu, opts.pattern.segments):
+        v = jnp.einsum("frk,frl->fkl", b.M, b.M)
+        if ids is not None:
+            v = jax.ops.segment_sum(v, jnp.asarray(ids), num_segments=int(ids.max()) + 1)
+        parts.append(v[:, p, q].ravel())
+    return c, jnp.concatenate(parts), g, _flat_diagonal(D)
 
 
 def _step(opts: _Options, variables, state, g, damping, free) -> jax.Array:
@@ -586,9 +641,42 @@ def _step(opts: _Options, variables, state, g, damping, free) -> jax.Array:
         return _cg(matvec, rhs, precondition, opts.cg_tolerance, opts.cg_max_iterations)
     pattern = opts.pattern
     assert pattern is not None
-    out = jax.ShapeDtypeStruct(g.shape, g.dtype)
-    host = lambda *a: onp.asarray(pattern.solve(*a), g.dtype)  # noqa: E731
-    return jax.pure_callback(host, out, state, damping, g, free, vmap_method="sequential")
+    # float64 travels as its bits both ways (``_as_bits``).
+    out = jax.eval_shape(_as_bits, g)
+
+    def host(values, damping, g, free):
+        delta = pattern.solve(*(_from_bits(onp.asarray(a)) for a in (values, damping, g)), free)
+        delta = onp.asarray(delta, onp.float64 if out.dtype == onp.uint32 else out.dtype)
+        return delta[..., None].view(onp.uint32) if out.dtype == onp.uint32 else delta
+
+    args = (_as_bits(state), _as_bits(damping), _as_bits(g), free)
+    delta = jax.pure_callback(host, out, *args, vmap_method="sequential")
+    return jax.lax.bitcast_convert_type(delta, g.dtype) if delta.dtype != g.dtype else delta
+
+
+@functools.lru_cache(maxsize=None)
+def _report(callback: Callable[..., None]) -> Callable[..., None]:
+    """``callback(iteration, cost, step, damping)`` on the host, at linearisation points
+    only (one wrapper per callback, so that ``jit`` keys on the callback itself)."""
+
+    def at_point(moved, it, values):
+        if bool(moved):
+            c, step, lam = (float(v) for v in _from_bits(onp.asarray(values)))
+            callback(int(it), c, step, lam)
+
+    return at_point
+
+
+def _as_bits(x: jax.Array) -> jax.Array:
+    """float64 as its bits, ``(..., 2)`` uint32, for a host callback: it may run on a thread
+    where x64 is off (a caller's ``jax.experimental.enable_x64`` context is per thread),
+    where JAX would pass, and check, float64 values as float32. Other dtypes as they are."""
+    return jax.lax.bitcast_convert_type(x, jnp.uint32) if x.dtype == jnp.float64 else x
+
+
+def _from_bits(a: onp.ndarray) -> onp.ndarray:
+    """The inverse of ``_as_bits``, on the host."""
+    return onp.ascontiguousarray(a).view(onp.float64)[..., 0] if a.dtype == onp.uint32 else a
 
 
 def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
@@ -613,6 +701,7 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
         nu=jnp.asarray(DAMPING_FACTOR, dtype),
         it=jnp.asarray(0, jnp.int32),
         reason=jnp.asarray(-1, jnp.int32),
+        step=jnp.zeros((), dtype),  # max |δ| of the last accepted step
     )
 
     def body(st):
@@ -622,6 +711,11 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
             lambda: _system(opts, factors, st["x"]),
             lambda: (st["cost"], st["system"], st["g"], st["diag"]),
         )
+        if opts.callback is not None:
+            # Partitioned: under a sharded solve each device calls it (with the same
+            # replicated scalars); one call on one device deadlocks the others' collectives.
+            values = _as_bits(jnp.stack([c, st["step"], st["lam"]]))
+            jax.debug.callback(_report(opts.callback), moved, st["it"], values, partitioned=True)
         # The decrease between the costs at two linearisation points.
         decrease = jnp.where(st["cost"] > 0, (st["cost"] - c) / st["cost"], 0.0)
         converged = moved & (st["it"] > 0) & (decrease < opts.tolerance)
@@ -674,6 +768,7 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
             nu=nu,
             it=st["it"] + go.astype(jnp.int32),
             reason=reason,
+            step=jnp.where(go, jnp.max(jnp.abs(delta), initial=0.0), st["step"]),
         )
 
     st = jax.lax.while_loop(lambda st: st["reason"] < 0, body, st0)
@@ -769,14 +864,15 @@ def solve(
     variables: Sequence[Variable],
     *,
     fixed: Optional[Sequence[Optional[jax.Array]]] = None,
-    method: Literal["lm", "gn"] = "lm",
+    method: hints.SolverMethod = "lm",
     max_iterations: int = 100,
     tolerance: float = 1e-7,
     initial_damping: float = 1e-5,
     diagonal_damping: bool = False,
-    linear_solver: Literal["auto", "dense", "pcg", "cholmod", "qdldl", "banded"] = "auto",
+    linear_solver: hints.LinearSolver = "auto",
     cg_tolerance: float = 1e-10,
     cg_max_iterations: int = 2000,
+    callback: Optional[Callable[[int, float, float, float], None]] = None,
 ) -> Solution:
     """Minimise ½ Σ ρ(‖r‖²) over the variables, from their given values.
 
@@ -801,12 +897,19 @@ def solve(
             inverse of H's diagonal block of each element), matrix-free; ``"cholmod"``,
             ``"qdldl"`` or ``"banded"``, a sparse (or banded) Cholesky on the host through
             ``jax.pure_callback``, its symbolic analysis done once per structure (these need
-            the index arrays concrete: close over them). ``"auto"``: dense up to
+            the index arrays concrete: close over them); ``"cholesky"``, CHOLMOD if cvxopt is
+            installed, else QDLDL. ``"auto"``: dense up to
             ``DENSE_LIMIT`` unknowns, else CHOLMOD or QDLDL when installed and the indices
             are concrete, else PCG.
         cg_tolerance: PCG's relative residual (also that of the implicit derivative's solve,
             for every solver but ``"dense"``).
         cg_max_iterations: PCG's iteration limit (the same).
+        callback: None, or ``callback(iteration, cost, step, damping)``, called on the host
+            (``jax.debug.callback``) at the initial point and after every accepted step,
+            with the number of accepted steps so far, the cost there, max |δ| of the step
+            that led there (0 at the start) and λ; for progress lines and timing. Static
+            (``jit`` keys on it); without ``vmap``, once per point in order (with the
+            factors' data sharded over devices, once per device and point).
 
     Returns:
         A ``Solution``. Under ``jax.vmap`` (initial values, data and indices batched over
@@ -839,7 +942,7 @@ def solve(
             raise ValueError(
                 f"least_squares.solve: fixed has {len(fixed)} entries for {len(variables)} sets"
             )
-    solvers = ("auto", "dense", "pcg", "cholmod", "qdldl", "banded")
+    solvers = typing.get_args(hints.LinearSolver)
     if linear_solver not in solvers:
         raise ValueError(
             f"least_squares.solve: linear_solver must be one of {solvers}, got {linear_solver!r}"
@@ -847,7 +950,7 @@ def solve(
     kind, pattern = _choose(linear_solver, factors, variables)
     opts = _Options(
         method, max_iterations, float(tolerance), float(initial_damping), bool(diagonal_damping),
-        kind, float(cg_tolerance), int(cg_max_iterations), pattern,
+        kind, float(cg_tolerance), int(cg_max_iterations), pattern, callback,
     )  # fmt: skip
     return _solve(opts, factors, variables, fixed)
 
@@ -864,8 +967,12 @@ def _choose(name: str, factors, variables) -> Tuple[str, Optional[_HostPattern]]
             name = "qdldl"
         else:
             name = "pcg"
+    if name == "cholesky":
+        name = "cholmod" if _sparse.installed("cholmod") else "qdldl"
     if name in ("dense", "pcg"):
         return name, None
+    if name in ("cholmod", "qdldl"):
+        _sparse.require(name)
     return "host", _host_pattern(factors, variables, name)
 
 

@@ -23,8 +23,7 @@ BENCHMARKS = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 
 LEAVES = {
     "hints", "_checks", "_xla", "_pytree", "_jit", "_batch", "_scalar", "_scalar_sim3",
-    "_projection", "_sparse",
-    "_least_squares",
+    "_projection", "_sparse", "_record",
 }  # fmt: skip
 """Modules with no knowledge of the group classes: the base imports them, never the reverse."""
 

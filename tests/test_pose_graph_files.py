@@ -551,3 +551,33 @@ def test_gtsam_files_without_vertices() -> None:
     )
     odometry = np.flatnonzero(graph.ids[graph.edges[:, 1]] == graph.ids[graph.edges[:, 0]] + 1)
     _check_chained(graph, odometry[:: len(odometry) // 50].tolist(), atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------
+# Graphs from group elements.
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_graph_from_group_elements(dim: int) -> None:
+    """Poses and measurements given as SE2 / SE3 elements (built from homogeneous matrices
+    of scipy's rotations) are stored as vertex-layout rows whose matrices are those
+    matrices, to rounding; an element of the other group raises ``ValueError``."""
+    from jaxlie_geo import SE2, SE3
+
+    G, other = (SE2, SE3) if dim == 2 else (SE3, SE2)
+    rows = _random_graph(dim, np.random.default_rng(7), n=12, e=20)
+    matrices = {
+        name: np.stack([_matrix(dim, r) for r in getattr(rows, name)])
+        for name in ("poses", "measurements")
+    }
+    elements = {name: G.from_matrix(m) for name, m in matrices.items()}
+    graph = PoseGraph(dim, rows.ids, elements["poses"], rows.edges, elements["measurements"],
+                      rows.information)  # fmt: skip
+    for name, want in matrices.items():
+        stored = getattr(graph, name)
+        assert stored.dtype == np.float64 and stored.shape == getattr(rows, name).shape
+        got = np.stack([_matrix(dim, r) for r in stored])
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12, err_msg=name)
+    with pytest.raises(ValueError, match=f"takes {G.__name__} elements, got {other.__name__}"):
+        PoseGraph(dim, rows.ids, other.identity((12,)), rows.edges, rows.measurements,
+                  rows.information)  # fmt: skip

@@ -1,4 +1,4 @@
-"""Between factors and the anchor, linearised in one batched, jit-compiled call.
+"""Between factors and the anchor, as ``least_squares.Factor`` s with closed-form Jacobians.
 
 The residual of an edge (i, j) with measurement Z_ij is the right-minus
 
@@ -11,11 +11,10 @@ robotics*, 2018, §III, the compose and right-minus rows):
     ∂r/∂δ_j = J_r⁻¹(r),    ∂r/∂δ_i = −J_r⁻¹(r) Ad(T_j⁻¹ T_i).
 
 Whitening by the upper-triangular square root W of the information (WᵀW = Ω) gives
-e = W r and the blocks A_i = W ∂r/∂δ_i, A_j = W ∂r/∂δ_j. A robust kernel ρ turns the
-cost of an edge into ½ ρ(‖e‖²); Gauss–Newton on it uses the iteratively reweighted form
-(Triggs, McLauchlan, Hartley and Fitzgibbon, *Bundle adjustment — a modern synthesis*,
-2000, §4.3, without the second-order correction, as GTSAM does): e and the blocks scaled
-by √ρ'(‖e‖²).
+e = W r and the blocks W ∂r/∂δ_i, W ∂r/∂δ_j. A robust kernel ρ turns the cost of an edge
+into ½ ρ(‖e‖²); ``least_squares`` solves it in the iteratively reweighted form (Triggs,
+McLauchlan, Hartley and Fitzgibbon, *Bundle adjustment — a modern synthesis*, 2000, §4.3,
+without the second-order correction, as GTSAM does).
 
 The anchor is a prior r_0 = log(P⁻¹ T_0) on the first pose, whitened by 1/σ, which fixes
 the gauge (the graph's cost is invariant under T ↦ S T for any S).
@@ -24,15 +23,14 @@ the gauge (the graph's cost is invariant under T ↦ S T for any S).
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Optional, Type, Union
+from typing import NamedTuple, Optional, Tuple, Type, Union
 
 import jax
 import jax.numpy as jnp
 
-from .. import manifold
+from .. import least_squares
 from .._se2 import SE2
 from .._se3 import SE3
-from .._sparse import Factors
 from .._xla import matmul
 
 Group = Union[SE2, SE3]
@@ -48,6 +46,11 @@ class Huber:
 
     def __post_init__(self) -> None:
         _check_threshold(self)
+
+    @property
+    def option(self) -> Tuple[str, float]:
+        """The kernel as ``least_squares.Factor``'s ``robust``."""
+        return ("huber", float(self.threshold))
 
     def rho_and_weight(self, s: jax.Array) -> tuple[jax.Array, jax.Array]:
         """ρ(s) and ρ'(s) of the squared norm s = u²."""
@@ -68,6 +71,11 @@ class Cauchy:
 
     def __post_init__(self) -> None:
         _check_threshold(self)
+
+    @property
+    def option(self) -> Tuple[str, float]:
+        """The kernel as ``least_squares.Factor``'s ``robust``."""
+        return ("cauchy", float(self.threshold))
 
     def rho_and_weight(self, s: jax.Array) -> tuple[jax.Array, jax.Array]:
         k2 = jnp.asarray(self.threshold, s.dtype) ** 2
@@ -95,64 +103,59 @@ class Problem(NamedTuple):
     anchor_weight: jax.Array  # () 1/σ
 
 
-def tr(A: jax.Array) -> jax.Array:
-    """Aᵀ over the last two axes."""
-    return jnp.swapaxes(A, -1, -2)
+def edge_residual(T_i: Group, T_j: Group, data: tuple[Group, jax.Array]) -> jax.Array:
+    """e = W log(Z⁻¹ T_i⁻¹ T_j) of one edge, ``data = (Z, W)``."""
+    Z, W = data
+    return mv(W, Z._between(T_i._between(T_j)).log())
+
+
+def edge_jacobian(
+    T_i: Group, T_j: Group, data: tuple[Group, jax.Array]
+) -> tuple[jax.Array, jax.Array]:
+    """e and W [∂r/∂δ_i, ∂r/∂δ_j] = W J_r⁻¹(r) [−Ad(T_j⁻¹ T_i), I], ``(k,)`` and ``(k, 2k)``."""
+    Z, W = data
+    E = Z._between(T_i._between(T_j))
+    J_j = E.jlog()  # J_r⁻¹(r)
+    J_i = -matmul(J_j, T_j._between(T_i).adjoint())
+    return mv(W, E.log()), matmul(W, jnp.concatenate([J_i, J_j], axis=-1))
+
+
+def anchor_residual(T_0: Group, data: tuple[Group, jax.Array]) -> jax.Array:
+    """e_0 = log(P⁻¹ T_0)/σ, ``data = (P, 1/σ)``."""
+    P, weight = data
+    return P._between(T_0).log() * weight
+
+
+def anchor_jacobian(T_0: Group, data: tuple[Group, jax.Array]) -> tuple[jax.Array, jax.Array]:
+    """e_0 and J_r⁻¹(r_0)/σ."""
+    P, weight = data
+    E = P._between(T_0)
+    return E.log() * weight, E.jlog() * weight
+
+
+def factors(
+    G: Type[Group], p: Problem, robust: Optional[RobustKernel]
+) -> tuple[least_squares.Factor, least_squares.Factor]:
+    """The edges as factors on (i, j) of the one variable set (the poses), the anchor as one
+    on pose 0."""
+    edges = least_squares.Factor(
+        edge_residual,
+        (0, 0),
+        (p.edge_i, p.edge_j),
+        (G(p.measurements), p.sqrt_information),
+        None if robust is None else robust.option,
+        jacobian=edge_jacobian,
+    )
+    anchor = least_squares.Factor(
+        anchor_residual,
+        (0,),
+        (jnp.zeros((1,), p.edge_i.dtype),),
+        (G(p.anchor[None]), p.anchor_weight[None]),
+        jacobian=anchor_jacobian,
+    )
+    return edges, anchor
 
 
 def mv(A: jax.Array, x: jax.Array) -> jax.Array:
-    """A x for stacks ``(..., m, n)`` and ``(..., n)``, at full precision."""
+    """A x for ``(..., m, n)`` and ``(..., n)``, at full precision."""
     return matmul(A, x[..., None])[..., 0]
-
-
-def _edges(G: Type[Group], poses: jax.Array, p: Problem) -> tuple[Any, Any, Any]:
-    T: Any = G(poses)
-    return T[p.edge_i], T[p.edge_j], G(p.measurements)
-
-
-def _costs(e: jax.Array, robust: Optional[RobustKernel]) -> tuple[jax.Array, jax.Array]:
-    s = jnp.sum(e * e, axis=-1)
-    if robust is None:
-        return 0.5 * s, jnp.ones_like(s)
-    rho, weight = robust.rho_and_weight(s)
-    return 0.5 * rho, weight
-
-
-def cost(G: Type[Group], poses: jax.Array, p: Problem, robust: Optional[RobustKernel]) -> jax.Array:
-    """½ Σ ρ(‖W r_ij‖²) + ½ ‖r_0/σ‖², a scalar."""
-    T_i, T_j, Z = _edges(G, poses, p)
-    r = Z._between(T_i._between(T_j)).log()
-    edge_costs, _ = _costs(mv(p.sqrt_information, r), robust)
-    anchor: Any = G(p.anchor)
-    r_0 = anchor._between(G(poses[0])).log() * p.anchor_weight
-    return jnp.sum(edge_costs) + 0.5 * jnp.sum(r_0 * r_0)
-
-
-def linearise(
-    G: Type[Group], poses: jax.Array, p: Problem, robust: Optional[RobustKernel]
-) -> tuple[jax.Array, tuple[Factors, Factors]]:
-    """The cost, and the whitened (and reweighted) residuals and Jacobian blocks: the edges
-    as factors on (i, j), the anchor as one on pose 0."""
-    T_i, T_j, Z = _edges(G, poses, p)
-    E = Z._between(T_i._between(T_j))
-    r = E.log()
-    J_j = E.jlog()  # J_r⁻¹(r)
-    J_i = -matmul(J_j, T_j._between(T_i).adjoint())
-    W = p.sqrt_information
-    e = mv(W, r)
-    edge_costs, weight = _costs(e, robust)
-    scale = jnp.sqrt(weight)[:, None]
-    A = matmul(W[:, None], jnp.stack([J_i, J_j], axis=1)) * scale[..., None, None]
-    anchor: Any = G(p.anchor)
-    E_0 = anchor._between(G(poses[0]))
-    e_0 = E_0.log() * p.anchor_weight
-    A_0 = E_0.jlog() * p.anchor_weight
-    total = jnp.sum(edge_costs) + 0.5 * jnp.sum(e_0 * e_0)
-    edges = Factors(jnp.stack([p.edge_i, p.edge_j], axis=-1), e * scale, A)
-    first = Factors(jnp.zeros((1, 1), p.edge_i.dtype), e_0[None], A_0[None, None])
-    return total, (edges, first)
-
-
-def retract(G: Type[Group], poses: jax.Array, delta: jax.Array) -> jax.Array:
-    """T_n ⊕ δ_n = T_n exp(δ_n) for every pose: parameters ``(N, P)``."""
-    return manifold.rplus(G(poses), delta).parameters()

@@ -11,6 +11,7 @@ from typing import Any, Literal, Union, cast
 
 import numpy as onp
 
+from .._base import MatrixLieGroup
 from .._se2 import SE2
 from .._se3 import SE3
 
@@ -34,13 +35,19 @@ class PoseGraph:
     - 2D (SE2): ``(x, y, θ)``, shape ``(·, 3)``;
     - 3D (SE3): ``(x, y, z, qx, qy, qz, qw)``, shape ``(·, 7)``, unit quaternion.
 
+    ``poses`` and ``measurements`` may also be given as group elements (``SE2`` for
+    ``dim=2``, ``SE3`` for ``dim=3``) of batch ``(N,)`` and ``(E,)``; they are stored in
+    that layout (``from_group``: θ = atan2(sin, cos), the quaternion as the element holds
+    it).
+
     Attributes:
         dim: 2 or 3.
         ids: ``(N,)`` int64, the vertex ids used in the file, in the order of ``poses``.
-        poses: ``(N, 3)`` or ``(N, 7)``, the estimate T_world_i of every vertex.
+        poses: ``(N, 3)`` or ``(N, 7)``, the estimate T_world_i of every vertex (or a group
+            element of batch ``(N,)``).
         edges: ``(E, 2)`` int64, indices ``(i, j)`` into ``poses`` (not ids).
-        measurements: ``(E, 3)`` or ``(E, 7)``, Zᵢⱼ, the measured pose of j in the frame
-            of i: Zᵢⱼ ≈ T_world_i⁻¹ T_world_j.
+        measurements: ``(E, 3)`` or ``(E, 7)`` (or a group element of batch ``(E,)``),
+            Zᵢⱼ, the measured pose of j in the frame of i: Zᵢⱼ ≈ T_world_i⁻¹ T_world_j.
         information: ``(E, k, k)``, symmetric positive definite, on this library's tangent
             of the residual rᵢⱼ = log(Zᵢⱼ⁻¹ T_world_i⁻¹ T_world_j): SE2 ``(vx, vy, ω)``,
             SE3 ``(vx, vy, vz, ωx, ωy, ωz)`` (translation first), k = 3 or 6.
@@ -57,6 +64,16 @@ class PoseGraph:
         if self.dim not in (2, 3):
             raise ValueError(f"PoseGraph: dim must be 2 or 3, got {self.dim!r}")
         w, k = POSE_WIDTH[self.dim], TANGENT_DIM[self.dim]
+        group = SE2 if self.dim == 2 else SE3
+        for name in ("poses", "measurements"):  # group elements to the vertex layout
+            value = getattr(self, name)
+            if isinstance(value, MatrixLieGroup):
+                if type(value) is not group:
+                    raise ValueError(
+                        f"PoseGraph.{name}: a {self.dim}D graph takes {group.__name__} "
+                        f"elements, got {type(value).__name__}"
+                    )
+                object.__setattr__(self, name, from_group(value))
         kinds = {"ids": "i", "poses": "f", "edges": "i", "measurements": "f", "information": "f"}
         for name, kind in kinds.items():  # integers to int64, reals to float64
             array = onp.asarray(getattr(self, name))

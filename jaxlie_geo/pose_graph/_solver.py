@@ -1,7 +1,8 @@
-"""Gauss–Newton and Levenberg–Marquardt on a pose graph: the graph as a least-squares
-problem for the shared loop (``jaxlie_geo._least_squares``, where the damping policy is
-described), each step one compiled call traced once per graph size (number of poses and
-edges) and reused by every iteration and every later solve of a graph of that size.
+"""Gauss–Newton and Levenberg–Marquardt on a pose graph: the graph as a problem of
+``jaxlie_geo.least_squares`` (one variable set, the poses; the edges and the anchor as two
+factors with closed-form Jacobians), solved in one compiled loop traced once per graph size
+(number of poses and edges) and linear solver, and reused by every later solve of a graph
+of that size.
 """
 
 from __future__ import annotations
@@ -10,51 +11,52 @@ import dataclasses
 import functools
 import importlib
 import time
-from typing import Any, Optional, Sequence, Type
+from typing import Any, Optional, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as onp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from .. import _least_squares as lsq
-from .. import hints
+from .. import _sparse, hints, least_squares
+from .._record import Record, callback, check_options, recording
 from .._xla import x64
-from ._factors import Group, Problem, RobustKernel, cost, linearise, retract
+from ._factors import Group, Problem, RobustKernel, factors
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
+
+#: ``"auto"`` takes the banded Cholesky (when neither sparse package is installed) only if
+#: the band holds at most this many times the pattern's stored entries.
+BAND_FILL_LIMIT = 4
 
 
 @dataclasses.dataclass(frozen=True)
-class Solution(lsq.Solution):
-    """What ``solve`` returns: the record of the least-squares loop (``costs``, ``times``,
-    ``iterations``, ``time``, ``stop_reason``, ``converged``; the costs are
-    ½ Σ ρ(‖W r‖²) + the anchor's ½ ‖r_0/σ‖²), and
+class Solution:
+    """What ``solve`` returns.
 
     Attributes:
+        costs: ``(iterations + 1,)``, the cost before the first and after every accepted
+            step: ½ Σ ρ(‖W r‖²) + the anchor's ½ ‖r_0/σ‖².
+        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
+            of the call to its evaluation (the first includes building the problem and, for
+            a new graph size, compiling).
+        iterations: accepted steps.
+        time: wall-clock seconds of the whole call.
+        stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
+        converged: whether it stopped at a minimum: on the tolerance, or with no step
+            lowering the cost at any damping (rather than at the iteration limit or, for
+            Gauss–Newton, on a step that raised the cost or a singular system).
         graph: the input graph with the optimised poses (``graph.poses``), ready to write.
         poses: the optimised poses, a group element of batch ``(N,)``, float64.
     """
 
+    costs: onp.ndarray
+    times: onp.ndarray
+    iterations: int
+    time: float
+    stop_reason: str
+    converged: bool
     graph: PoseGraph
     poses: Group
-
-
-@dataclasses.dataclass(frozen=True)
-class _GraphModel:
-    """The pose graph's cost as a ``_least_squares.Model``: x the poses' parameters
-    ``(N, P)``, the data a ``Problem``."""
-
-    group: Type[Group]
-    robust: Optional[RobustKernel]
-
-    def linearise(self, x: jax.Array, data: Problem):
-        return linearise(self.group, x, data, self.robust)
-
-    def cost(self, x: jax.Array, data: Problem) -> jax.Array:
-        return cost(self.group, x, data, self.robust)
-
-    def retract(self, x: jax.Array, delta: jax.Array) -> jax.Array:
-        return retract(self.group, x, delta)
 
 
 def _problem(
@@ -169,7 +171,7 @@ def solve(
         ValueError: an argument out of range, an information matrix that is not
             positive definite, or a graph that is not connected.
     """
-    lsq.check_options(
+    check_options(
         "solve", method, linear_solver, max_iterations,
         anchor_sigma=anchor_sigma, tolerance=tolerance, initial_damping=initial_damping,
     )  # fmt: skip
@@ -181,21 +183,56 @@ def solve(
         raise ValueError("solve: an edge joins a pose to itself")
     _check_connected(graph)
     start = time.perf_counter()
+    record = Record(start, progress, max_iterations)
+    solver = _linear_solver(linear_solver, graph)
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, devices)
-        indices = [onp.stack([onp.asarray(p.edge_i), onp.asarray(p.edge_j)], -1), onp.zeros((1, 1))]
-        model = _GraphModel(graph.group, robust)
-        linear = lsq.system(
-            model, p, indices, graph.num_poses, TANGENT_DIM[graph.dim], linear_solver,
-            diagonal_damping, cg_tolerance, cg_max_iterations,
-        )  # fmt: skip
-        poses, record = lsq.minimise(
-            model, poses, p, linear, method=method, max_iterations=max_iterations,
-            tolerance=tolerance, initial_damping=initial_damping, progress=progress, start=start,
-        )  # fmt: skip
-        T = graph.group(jax.device_get(poses))
-    fields = {f.name: getattr(record, f.name) for f in dataclasses.fields(record)}
-    return Solution(**fields, graph=graph.with_poses(from_group(T)), poses=T)
+        G = graph.group
+        with recording(record):
+            sol = least_squares.solve(
+                factors(G, p, robust), (G(poses),), method=method,
+                max_iterations=max_iterations, tolerance=tolerance,
+                initial_damping=initial_damping, diagonal_damping=diagonal_damping,
+                linear_solver=solver,
+                cg_tolerance=cg_tolerance, cg_max_iterations=cg_max_iterations,
+                callback=callback,
+            )  # fmt: skip
+            sol = jax.block_until_ready(sol)  # every callback has run
+        T = G(jax.device_get(sol.variables[0].parameters()))
+        iterations = int(sol.iterations)
+    reason = least_squares.StopReason(int(sol.stop_reason))
+    record.close(reason.description)
+    costs, times = record.arrays(iterations)
+    return Solution(
+        costs=costs,
+        times=times,
+        iterations=iterations,
+        time=time.perf_counter() - start,
+        stop_reason=reason.description,
+        converged=bool(sol.converged),
+        graph=graph.with_poses(from_group(T)),
+        poses=T,
+    )
+
+
+def _linear_solver(name: str, graph: PoseGraph) -> str:
+    """``least_squares.solve``'s name for ``name``: ``"cholesky"`` is CHOLMOD if cvxopt
+    imports, else QDLDL; ``"auto"`` is ``"cholesky"`` if either imports, else the banded
+    Cholesky if H's band is narrow (at most ``BAND_FILL_LIMIT`` times its stored entries),
+    else PCG."""
+    if name == "auto":
+        if _sparse.installed("cholmod") or _sparse.installed("qdldl"):
+            name = "cholesky"
+        else:
+            k, n = TANGENT_DIM[graph.dim], graph.num_poses
+            i, j = onp.sort(graph.edges, axis=1).T
+            pairs = onp.unique(i * n + j).size
+            bandwidth = int(onp.max(j - i)) * k + k - 1
+            nnz = n * k * (k + 1) // 2 + pairs * k * k
+            name = "banded" if (bandwidth + 1) * n * k <= BAND_FILL_LIMIT * nnz else "pcg"
+    if name == "cholesky":
+        name = "cholmod" if _sparse.installed("cholmod") else "qdldl"
+    return name
 
 
 def _check_connected(graph: PoseGraph) -> None:
@@ -222,9 +259,9 @@ def graph_cost(
     itself, so it adds 0): ½ Σ ρ(‖Wᵢⱼ rᵢⱼ‖²), float64."""
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, None)
-        return float(_cost_jit(graph.group, robust, poses, p))
+        return float(_cost_jit(robust, graph.group(poses), p))
 
 
-@functools.partial(jax.jit, static_argnums=(0, 1))
-def _cost_jit(G, robust, poses, p):
-    return cost(G, poses, p, robust)
+@functools.partial(jax.jit, static_argnums=(0,))
+def _cost_jit(robust, poses, p):
+    return least_squares.cost(factors(type(poses), p, robust), (poses,))

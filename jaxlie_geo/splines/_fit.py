@@ -1,9 +1,11 @@
-"""Least-squares fit of a spline to time-stamped elements on the group, through the loop
-of ``_least_squares`` with the spline's exact control-point Jacobians."""
+"""Least-squares fit of a spline to time-stamped elements on the group: one factor per
+sample on the ``degree + 1`` control points that shape it, with the spline's exact
+control-point Jacobians, solved by ``least_squares.solve``."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from typing import Any, Optional, Tuple, Union
 
@@ -11,62 +13,71 @@ import jax
 import jax.numpy as jnp
 import numpy as onp
 
-from .. import _least_squares as lsq
-from .. import hints
+from .. import _sparse, hints, least_squares
 from .._base import GroupT, MatrixLieGroup
-from .._least_squares import Solution
-from .._sparse import Factors
+from .._record import Record, callback, check_options, recording
 from .._xla import matmul
 from ._curve import Spline, SplineTime, _evaluate, _jacobians
 
 
 @dataclasses.dataclass(frozen=True)
-class SplineFit(Solution):
-    """What ``fit`` returns: the record of the least-squares loop (``costs``, ½ Σ wᵢ ‖rᵢ‖²
-    before the first step and after each accepted one; ``times``; ``iterations``, the
-    accepted steps; ``time``; ``stop_reason``; ``converged``), and
+class SplineFit:
+    """What ``fit`` returns: the record of the least-squares loop, and the spline.
 
     Attributes:
+        costs: ``(iterations + 1,)``, ½ Σ wᵢ ‖rᵢ‖² before the first step and after each
+            accepted one.
+        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
+            of the call to its evaluation (the first includes compiling, for a new size).
+        iterations: accepted steps.
+        time: wall-clock seconds of the whole call.
+        stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
+        converged: whether it stopped on the tolerance or with no step lowering the cost.
         spline: the fitted ``Spline``.
     """
 
+    costs: onp.ndarray
+    times: onp.ndarray
+    iterations: int
+    time: float
+    stop_reason: str
+    converged: bool
     spline: Any
 
 
 @dataclasses.dataclass(frozen=True)
-class _FitModel:
-    """The fit's cost as a ``_least_squares.Model``: x the control points' parameters
-    ``(n, P)``; the data the samples' ``SplineTime``, the parameters of the Zᵢ and the
-    weights ``(N, tangent_dim)``. One factor per sample, on the ``order`` control points
-    that shape it."""
+class _Sample:
+    """One sample's residual √w ⊙ log(Z⁻¹ T(t)) as a ``least_squares`` residual of the
+    ``degree + 1`` control points that shape it (the sample's segment as the first of a
+    spline of those points), its data ``(fraction, Z, √w)``; and its closed-form Jacobian,
+    ``Spline.jacobians`` composed with J_r⁻¹ of the residual."""
 
-    group: Any
     degree: int
-    t0: Union[int, float]
     dt: Union[int, float]
 
-    def _spline(self, x: jax.Array) -> Spline[Any]:
-        return Spline(self.group(x), degree=self.degree, t0=self.t0, dt=self.dt)
+    def _local(self, points: Tuple[Any, ...], fraction: jax.Array):
+        cp = jax.tree_util.tree_map(lambda *p: jnp.stack(p), *points)
+        spline = Spline(cp, degree=self.degree, t0=0, dt=self.dt)
+        return spline, SplineTime(jnp.zeros((), jnp.int32), fraction)
 
-    def _residual(self, x: jax.Array, data: Tuple[SplineTime, jax.Array, jax.Array]):
-        where, poses, w = data
-        value = _evaluate(self._spline(x), where, 0).value
-        return self.group(poses)._between(value).log(), jnp.sqrt(w)
+    def __call__(self, *args: Any) -> jax.Array:
+        *points, (fraction, Z, s) = args
+        spline, where = self._local(tuple(points), fraction)
+        return s * Z._between(_evaluate(spline, where, 0).value).log()
 
-    def cost(self, x: jax.Array, data: Tuple[SplineTime, jax.Array, jax.Array]) -> jax.Array:
-        r, s = self._residual(x, data)
-        return 0.5 * jnp.sum((s * r) ** 2)
+    def jacobian(self, *args: Any) -> Tuple[jax.Array, jax.Array]:
+        *points, (fraction, Z, s) = args
+        spline, where = self._local(tuple(points), fraction)
+        r = Z._between(_evaluate(spline, where, 0).value).log()
+        J = matmul(type(Z).jac_right_inv(r), _jacobians(spline, where).value)  # (order, k, k)
+        return s * r, s[:, None] * jnp.concatenate(list(J), axis=-1)
 
-    def linearise(self, x: jax.Array, data: Tuple[SplineTime, jax.Array, jax.Array]):
-        r, s = self._residual(x, data)
-        jac = _jacobians(self._spline(x), data[0])
-        J = matmul(self.group.jac_right_inv(r)[:, None], jac.value)  # (N, order, k, k)
-        e = s * r
-        variables = jac.first[:, None] + jnp.arange(self.degree + 1)
-        return 0.5 * jnp.sum(e * e), (Factors(variables, e, s[:, None, :, None] * J),)
 
-    def retract(self, x: jax.Array, delta: jax.Array) -> jax.Array:
-        return (self.group(x) @ self.group.exp(delta)).parameters()
+@functools.lru_cache(maxsize=None)
+def _sample(degree: int, dt: Union[int, float]) -> _Sample:
+    """One ``_Sample`` per degree and knot spacing: ``jit`` keys the loop on the residual
+    and on its bound ``jacobian``, which compare by the instance's identity."""
+    return _Sample(degree, dt)
 
 
 def fit(
@@ -123,7 +134,7 @@ def fit(
             knots, or an option out of range.
     """
     clock = time.perf_counter()
-    lsq.check_options(
+    check_options(
         "splines.fit", method, linear_solver, max_iterations,
         tolerance=tolerance, initial_damping=initial_damping,
     )  # fmt: skip
@@ -161,14 +172,34 @@ def fit(
             f"{w_np.shape}."
         )
     w = jnp.asarray(onp.broadcast_to(w_np.reshape(N, -1), (N, k)), dtype)
-    model = _FitModel(G, degree, start, dt)
-    data = (where, poses.parameters(), w)
-    variables = onp.asarray(where.segment)[:, None] + onp.arange(degree + 1)
-    linear = lsq.system(model, data, [variables], n, k, linear_solver, diagonal_damping=True)
-    x, record = lsq.minimise(
-        model, initial.control_points.parameters(), data, linear, method=method,
-        max_iterations=max_iterations, tolerance=tolerance, initial_damping=initial_damping,
-        progress=progress, start=clock,
+    sample = _sample(degree, dt)
+    first = onp.asarray(where.segment)
+    factor = least_squares.Factor(
+        sample,
+        (0,) * (degree + 1),
+        tuple(jnp.asarray(first + m) for m in range(degree + 1)),
+        (jnp.broadcast_to(where.fraction, (N,)), poses, jnp.sqrt(w)),
+        jacobian=sample.jacobian,
+    )
+    if linear_solver in ("auto", "cholesky"):
+        installed = [b for b in ("cholmod", "qdldl") if _sparse.installed(b)]
+        fallback = "banded" if linear_solver == "auto" else "qdldl"
+        linear_solver = installed[0] if installed else fallback
+    record = Record(clock, progress, max_iterations)
+    with recording(record):
+        sol = least_squares.solve(
+            [factor], (initial.control_points,), method=method,
+            max_iterations=max_iterations, tolerance=tolerance,
+            initial_damping=initial_damping, diagonal_damping=True,
+            linear_solver=linear_solver, callback=callback,
+        )  # fmt: skip
+        sol = jax.block_until_ready(sol)  # every callback has run
+    iterations = int(sol.iterations)
+    reason = least_squares.StopReason(int(sol.stop_reason)).description
+    record.close(reason)
+    costs, times = record.arrays(iterations)
+    spline = Spline(sol.variables[0], degree=degree, t0=start, dt=dt)
+    return SplineFit(
+        costs=costs, times=times, iterations=iterations, time=time.perf_counter() - clock,
+        stop_reason=reason, converged=bool(sol.converged), spline=spline,
     )  # fmt: skip
-    fields = {f.name: getattr(record, f.name) for f in dataclasses.fields(record)}
-    return SplineFit(**fields, spline=model._spline(x))
