@@ -23,7 +23,7 @@ the gauge (the graph's cost is invariant under T ↦ S T for any S).
 from __future__ import annotations
 
 import dataclasses
-from typing import NamedTuple, Optional, Tuple, Type, Union
+from typing import Any, NamedTuple, Optional, Type, Union
 
 import jax
 import jax.numpy as jnp
@@ -48,18 +48,13 @@ class Huber:
         _check_threshold(self)
 
     @property
-    def option(self) -> Tuple[str, float]:
+    def option(self) -> least_squares.Robust:
         """The kernel as ``least_squares.Factor``'s ``robust``."""
         return ("huber", float(self.threshold))
 
     def rho_and_weight(self, s: jax.Array) -> tuple[jax.Array, jax.Array]:
         """ρ(s) and ρ'(s) of the squared norm s = u²."""
-        k = jnp.asarray(self.threshold, s.dtype)
-        u = jnp.sqrt(s)
-        inside = u <= k
-        rho = jnp.where(inside, s, 2.0 * k * u - k * k)
-        weight = jnp.where(inside, 1.0, k / jnp.where(inside, 1.0, u))
-        return rho, weight
+        return least_squares._rho(self.option, s)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,13 +68,13 @@ class Cauchy:
         _check_threshold(self)
 
     @property
-    def option(self) -> Tuple[str, float]:
+    def option(self) -> least_squares.Robust:
         """The kernel as ``least_squares.Factor``'s ``robust``."""
         return ("cauchy", float(self.threshold))
 
     def rho_and_weight(self, s: jax.Array) -> tuple[jax.Array, jax.Array]:
-        k2 = jnp.asarray(self.threshold, s.dtype) ** 2
-        return k2 * jnp.log1p(s / k2), 1.0 / (1.0 + s / k2)
+        """ρ(s) and ρ'(s) of the squared norm s."""
+        return least_squares._rho(self.option, s)
 
 
 RobustKernel = Union[Huber, Cauchy]
@@ -103,15 +98,13 @@ class Problem(NamedTuple):
     anchor_weight: jax.Array  # () 1/σ
 
 
-def edge_residual(T_i: Group, T_j: Group, data: tuple[Group, jax.Array]) -> jax.Array:
+def edge_residual(T_i: Any, T_j: Any, data: tuple[Any, jax.Array]) -> jax.Array:
     """e = W log(Z⁻¹ T_i⁻¹ T_j) of one edge, ``data = (Z, W)``."""
     Z, W = data
     return mv(W, Z._between(T_i._between(T_j)).log())
 
 
-def edge_jacobian(
-    T_i: Group, T_j: Group, data: tuple[Group, jax.Array]
-) -> tuple[jax.Array, jax.Array]:
+def edge_jacobian(T_i: Any, T_j: Any, data: tuple[Any, jax.Array]) -> tuple[jax.Array, jax.Array]:
     """e and W [∂r/∂δ_i, ∂r/∂δ_j] = W J_r⁻¹(r) [−Ad(T_j⁻¹ T_i), I], ``(k,)`` and ``(k, 2k)``."""
     Z, W = data
     E = Z._between(T_i._between(T_j))
@@ -120,13 +113,13 @@ def edge_jacobian(
     return mv(W, E.log()), matmul(W, jnp.concatenate([J_i, J_j], axis=-1))
 
 
-def anchor_residual(T_0: Group, data: tuple[Group, jax.Array]) -> jax.Array:
+def anchor_residual(T_0: Any, data: tuple[Any, jax.Array]) -> jax.Array:
     """e_0 = log(P⁻¹ T_0)/σ, ``data = (P, 1/σ)``."""
     P, weight = data
     return P._between(T_0).log() * weight
 
 
-def anchor_jacobian(T_0: Group, data: tuple[Group, jax.Array]) -> tuple[jax.Array, jax.Array]:
+def anchor_jacobian(T_0: Any, data: tuple[Any, jax.Array]) -> tuple[jax.Array, jax.Array]:
     """e_0 and J_r⁻¹(r_0)/σ."""
     P, weight = data
     E = P._between(T_0)

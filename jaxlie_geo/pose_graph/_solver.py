@@ -215,7 +215,7 @@ def solve(
     )
 
 
-def _linear_solver(name: str, graph: PoseGraph) -> str:
+def _linear_solver(name: hints.LinearSolver, graph: PoseGraph) -> hints.LinearSolver:
     """``least_squares.solve``'s name for ``name``: ``"cholesky"`` is CHOLMOD if cvxopt
     imports, else QDLDL; ``"auto"`` is ``"cholesky"`` if either imports, else the banded
     Cholesky if H's band is narrow (at most ``BAND_FILL_LIMIT`` times its stored entries),

@@ -182,8 +182,10 @@ def fit(
         jacobian=sample.jacobian,
     )
     if linear_solver in ("auto", "cholesky"):
-        installed = [b for b in ("cholmod", "qdldl") if _sparse.installed(b)]
-        fallback = "banded" if linear_solver == "auto" else "qdldl"
+        installed: list[hints.LinearSolver] = [
+            b for b in ("cholmod", "qdldl") if _sparse.installed(b)
+        ]
+        fallback: hints.LinearSolver = "banded" if linear_solver == "auto" else "qdldl"
         linear_solver = installed[0] if installed else fallback
     record = Record(clock, progress, max_iterations)
     with recording(record):
