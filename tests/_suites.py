@@ -125,6 +125,11 @@ SLOW: List[Tuple[str, str]] = [
         "the same test in float64 (the comparisons read the same code in both dtypes)",
     ),
     (
+        r"test_least_squares\.py::test_closed_form_jacobian_equals_autodiff\[SE3\]",
+        "the same test on SE2 (the linearisation is one code path for every group), and "
+        "test_pose_graph's SE2 solves, whose edges carry closed-form Jacobians",
+    ),
+    (
         r"test_pose_graph\.py::.*\[SE3\]",
         "the same test on SE2 (the solver is one code path for both dimensions), and "
         "test_example_pose_graph on SE3",
