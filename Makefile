@@ -41,8 +41,8 @@ lint: $(VENV)/.installed-test
 # module, group and dtype, values and first derivatives. `make test-full` adds the slow
 # checks (tests/_suites.py: the same code paths at other dtypes, degrees, grids, batch
 # shapes), the docs build and the notebooks. Each fails above its compile budget
-# (tests/_compile_budget.py). From a fresh clone on 2 cores: `make test` 14.5-15 minutes
-# (pytest 13-14), `make test-full` 39 (pytest 37); tests/README.md has the counts.
+# (tests/_compile_budget.py). From a fresh clone on 2 cores: `make test` 12 minutes
+# (pytest 11), `make test-full` 39 (pytest 37, before least_squares); tests/README.md has the counts.
 PYTEST := $(PY) -m pytest -n auto --maxprocesses 8 --dist worksteal
 
 test: lint
