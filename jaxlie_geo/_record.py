@@ -10,15 +10,45 @@ that ``recording`` holds open.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import sys
 import time
+import typing
 from typing import Dict, Iterator, List, Tuple
 
 import numpy as onp
 
+from . import hints
+
 #: The names ``linear_solver`` accepts.
-LINEAR_SOLVERS = ("auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg")
+LINEAR_SOLVERS = typing.get_args(hints.LinearSolver)
+
+
+@dataclasses.dataclass(frozen=True)
+class Solve:
+    """The record of a solve, which ``pose_graph.solve`` and ``splines.fit`` extend.
+
+    Attributes:
+        costs: ``(iterations + 1,)``, the cost before the first and after every accepted
+            step.
+        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
+            of the call to its evaluation (the first includes building the problem and, for
+            a new problem size, compiling).
+        iterations: accepted steps.
+        time: wall-clock seconds of the whole call.
+        stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
+        converged: whether it stopped at a minimum: on the tolerance, or with no step
+            lowering the cost at any damping (rather than at the iteration limit or, for
+            Gauss–Newton, on a step that raised the cost or a singular system).
+    """
+
+    costs: onp.ndarray
+    times: onp.ndarray
+    iterations: int
+    time: float
+    stop_reason: str
+    converged: bool
 
 
 def check_options(

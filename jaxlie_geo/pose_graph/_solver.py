@@ -19,7 +19,7 @@ import numpy as onp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from .. import _sparse, hints, least_squares
-from .._record import Record, callback, check_options, recording
+from .._record import Record, Solve, callback, check_options, recording
 from .._xla import x64
 from ._factors import Group, Problem, RobustKernel, factors
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
@@ -30,31 +30,16 @@ BAND_FILL_LIMIT = 4
 
 
 @dataclasses.dataclass(frozen=True)
-class Solution:
-    """What ``solve`` returns.
+class Solution(Solve):
+    """What ``solve`` returns: the record of the solve (``costs``, ``times``, ``iterations``,
+    ``time``, ``stop_reason``, ``converged``; the costs are ½ Σ ρ(‖W r‖²) + the anchor's
+    ½ ‖r_0/σ‖²), and
 
     Attributes:
-        costs: ``(iterations + 1,)``, the cost before the first and after every accepted
-            step: ½ Σ ρ(‖W r‖²) + the anchor's ½ ‖r_0/σ‖².
-        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
-            of the call to its evaluation (the first includes building the problem and, for
-            a new graph size, compiling).
-        iterations: accepted steps.
-        time: wall-clock seconds of the whole call.
-        stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
-        converged: whether it stopped at a minimum: on the tolerance, or with no step
-            lowering the cost at any damping (rather than at the iteration limit or, for
-            Gauss–Newton, on a step that raised the cost or a singular system).
         graph: the input graph with the optimised poses (``graph.poses``), ready to write.
         poses: the optimised poses, a group element of batch ``(N,)``, float64.
     """
 
-    costs: onp.ndarray
-    times: onp.ndarray
-    iterations: int
-    time: float
-    stop_reason: str
-    converged: bool
     graph: PoseGraph
     poses: Group
 

@@ -15,33 +15,21 @@ import numpy as onp
 
 from .. import _sparse, hints, least_squares
 from .._base import GroupT, MatrixLieGroup
-from .._record import Record, callback, check_options, recording
+from .._record import Record, Solve, callback, check_options, recording
 from .._xla import matmul
 from ._curve import Spline, SplineTime, _evaluate, _jacobians
 
 
 @dataclasses.dataclass(frozen=True)
-class SplineFit:
-    """What ``fit`` returns: the record of the least-squares loop, and the spline.
+class SplineFit(Solve):
+    """What ``fit`` returns: the record of the solve (``costs``, ½ Σ wᵢ ‖rᵢ‖² before the
+    first step and after each accepted one; ``times``; ``iterations``; ``time``;
+    ``stop_reason``; ``converged``), and
 
     Attributes:
-        costs: ``(iterations + 1,)``, ½ Σ wᵢ ‖rᵢ‖² before the first step and after each
-            accepted one.
-        times: ``(iterations + 1,)``, for each cost the wall-clock seconds from the start
-            of the call to its evaluation (the first includes compiling, for a new size).
-        iterations: accepted steps.
-        time: wall-clock seconds of the whole call.
-        stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
-        converged: whether it stopped on the tolerance or with no step lowering the cost.
         spline: the fitted ``Spline``.
     """
 
-    costs: onp.ndarray
-    times: onp.ndarray
-    iterations: int
-    time: float
-    stop_reason: str
-    converged: bool
     spline: Any
 
 
