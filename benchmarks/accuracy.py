@@ -1,37 +1,17 @@
-"""Accuracy benchmark: worst error in ulp of exp, log and the derivatives of log∘exp,
-jaxlie_geo next to jaxlie 1.5, against mpmath references.
-
-The measurement is the one tests/test_accuracy.py asserts (shared code: benchmarks/mpref.py):
-per output block, ulp_err = ‖got − ref‖_∞ / (eps · max(1, ‖ref‖_∞)), the reference computed
-in mpmath at 60 digits from the float each function actually received (subnormals flushed,
-as XLA on CPU does). log's input is a stored group element (the exact exp of the stored
-tangent, rounded to the dtype), its reference the principal log of exactly that element.
-"d/dx" is max |d log(exp(x))/dx − I| and "d²/dx²" max |d² log(exp(x))/dx²| in ulp, the
-entries of an output vector differentiated by ω (Sim3: also by σ) divided by max(1, ‖v‖);
-derivatives are checked only below π. Both libraries get the same inputs: for every
-group × dtype × angle regime × translation norm {0, 1e-6, 1, 1e3} (groups with one),
---samples random draws with a fixed seed (the band's end points included). float32 runs
-with jax_enable_x64 off, float64 with it on. jaxlie has no Sim3 or SE23: their cells
-show jaxlie_geo only.
-
-Sim3 also gets its joint (θ, σ) regimes (benchmarks/mpref.py, ``_angles_sigmas``) and a
-comparison of its exp translation t = W v with the textbook closed form of W evaluated as
-it stands (``textbook_sim3_coefficients``), on the same inputs and the same measure.
-
-With --save the worst errors replace raw/<machine>/accuracy.json and the results page
-(RESULTS.md) is regenerated (report.py).
+"""Worst error in ulp of exp, log and the derivatives of log∘exp, jaxlie_geo beside jaxlie
+1.5, against mpmath; the measurement ``tests/test_accuracy.py`` asserts (``mpref.py`` holds
+the references, the regimes and the measure). Sim3 also gets its joint (θ, σ) regimes and a
+comparison of its exp translation with the textbook closed form of W
+(``textbook_sim3_coefficients``). The method is on the results page (``methods.md``).
 
 Usage:
-  python -m benchmarks.accuracy                 # markdown tables (float32, float64, Sim3)
-  python -m benchmarks.accuracy --save          # ... saved to raw/<machine>/, page regenerated
-  python -m benchmarks.accuracy --worst         # also list the worst input of each failing cell
+  python -m benchmarks.accuracy [--save]        # Markdown tables (float32, float64, Sim3)
+  python -m benchmarks.accuracy --worst         # also the worst input of each failing cell
   python -m benchmarks.accuracy --samples 16 --groups SE3 --json out.json
-  python -m benchmarks.accuracy --groups Sim3 --no-jaxlie   # Sim3's tables alone
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -40,9 +20,15 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
+import jax.numpy as jnp  # noqa: E402
+import jaxlie  # noqa: E402
+import mpmath as mp  # noqa: E402
+
+import jaxlie_geo  # noqa: E402
 from benchmarks import common  # noqa: E402
 from benchmarks import mpref as M  # noqa: E402
-from benchmarks.report import accuracy_tables, save  # noqa: E402
+from benchmarks.report import accuracy_table, save  # noqa: E402
+from jaxlie_geo import _scalar_sim3  # noqa: E402
 
 OP_TEXT = {"exp": "exp", "log": "log", "jac": "d/dx", "hess": "d²/dx²"}
 REGIME_HEAD = {
@@ -139,18 +125,12 @@ def textbook_sim3_translation(tangent, dtype: str, eps: float | None = None) -> 
     theta = np.sqrt(np.sum(w * w, axis=-1))
     A, B, C = textbook_sim3_coefficients(sigma, theta, dtype, eps)
     z = np.zeros_like(w[:, 0])
-    Om = np.stack(
-        [
-            np.stack([z, -w[:, 2], w[:, 1]], -1),
-            np.stack([w[:, 2], z, -w[:, 0]], -1),
-            np.stack([-w[:, 1], w[:, 0], z], -1),
-        ],
-        -2,
-    )
+    rows = [[z, -w[:, 2], w[:, 1]], [w[:, 2], z, -w[:, 0]], [-w[:, 1], w[:, 0], z]]
+    Om = np.stack([np.stack(r, -1) for r in rows], -2)
     W = (
         A[:, None, None] * np.eye(3, dtype=dt)
         + B[:, None, None] * Om
-        + C[:, None, None] * np.matmul(Om, Om)
+        + C[:, None, None] * (Om @ Om)
     )
     return np.matmul(W, v[:, :, None])[:, :, 0].astype(dt)
 
@@ -190,8 +170,6 @@ def sim3_comparison(samples: int, seed: int, sim3_runs=None) -> list:
     """Markdown lines: worst ulp of Sim3's exp translation, jaxlie_geo vs the textbook closed
     form, per row of ``_comparison_rows`` and dtype; then B and C at θ = σ → 0.
     ``sim3_runs``: {dtype: (cases, jaxlie_geo's evaluate result)} to reuse."""
-    import jaxlie_geo
-
     per_dtype = {}
     for dt in M.DTYPES:
         if sim3_runs and dt in sim3_runs:
@@ -233,11 +211,6 @@ def coefficient_lines() -> list:
     """Markdown lines: B and C (W = A I + B ω̂ + C ω̂²) at θ = |σ| = r from mpmath, and the
     relative errors of jaxlie_geo's ``_scalar_sim3.sim3_coefficients`` and of the textbook closed
     form there."""
-    import jax.numpy as jnp
-    import mpmath as mp
-
-    from jaxlie_geo import _scalar_sim3
-
     rows = [("float64", 1e-5), ("float64", 1e-6), ("float32", 1e-3), ("float32", 1e-4)]
     lines = [
         "| dtype | θ | σ | B | B: ours | B: closed form | C | C: ours | C: closed form |",
@@ -288,29 +261,20 @@ def sim3_regime_table(worst: dict, dtypes) -> list:
     return lines
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--samples", type=int, default=64, help="draws per (regime, |v|) cell")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--groups", default=",".join(M.GROUPS))
-    ap.add_argument("--dtypes", default=",".join(M.DTYPES))
-    ap.add_argument("--worst", action="store_true", help="print the worst input of failing cells")
-    ap.add_argument("--no-jaxlie", action="store_true")
-    common.add_save_arguments(ap)
-    args = ap.parse_args()
-    groups = [g for g in args.groups.split(",") if g]
-    dtypes = [d for d in args.dtypes.split(",") if d]
+def main(argv=None) -> int:
+    p = common.parser(__doc__, groups=M.GROUPS, dtypes=M.DTYPES)
+    p.add_argument("--samples", type=int, default=64, help="draws per (regime, |v|) cell")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--worst", action="store_true", help="print the worst input of failing cells")
+    p.add_argument("--no-jaxlie", action="store_true")
+    args = common.parse(p, argv)
+    groups, dtypes = args.groups, args.dtypes
 
-    import jaxlie_geo
-
-    libs = {"jaxlie_geo": jaxlie_geo}
-    if not args.no_jaxlie:
-        try:
-            import jaxlie
-
-            libs["jaxlie"] = jaxlie
-        except ImportError:
-            print("jaxlie not installed: reporting jaxlie_geo only", file=sys.stderr)
+    libs = (
+        {"jaxlie_geo": jaxlie_geo}
+        if args.no_jaxlie
+        else {"jaxlie_geo": jaxlie_geo, "jaxlie": jaxlie}
+    )
 
     t0 = time.perf_counter()
     M.check_references()
@@ -329,12 +293,9 @@ def main() -> int:
                 for op in M.OPS:
                     over = ~(res[op] <= cases.bound(op)) & cases.mask(op)
                     for r, (e, k) in M.worst_by_regime(cases, res[op]).items():
-                        worst[(name, g, op, dt, r)] = (
-                            e,
-                            M.describe_case(cases, k, op),
-                            M.block_errors(cases, k, op, res),
-                            bool(np.any(over[cases.regime == r])),
-                        )
+                        where = M.block_errors(cases, k, op, res)
+                        bad = bool(np.any(over[cases.regime == r]))
+                        worst[(name, g, op, dt, r)] = (e, M.describe_case(cases, k, op), where, bad)
             print(f"  {g} {dt}: {len(cases.regime)} inputs", file=sys.stderr)
     elapsed = time.perf_counter() - t0
 
@@ -342,18 +303,14 @@ def main() -> int:
 
     sections = []
     if "Sim3" in groups:
+        title = "Sim(3), joint (θ, σ) regimes (jaxlie_geo)"
         sections.append(
-            {
-                "title": "Sim(3), joint (θ, σ) regimes (jaxlie_geo)",
-                "lines": sim3_regime_table(worst, dtypes) + [""] + SIM3_NOTES,
-            }
+            {"title": title, "lines": sim3_regime_table(worst, dtypes) + [""] + SIM3_NOTES}
         )
         if set(dtypes) == set(M.DTYPES):
+            title = "Sim(3) exp translation: jaxlie_geo vs the textbook closed form"
             sections.append(
-                {
-                    "title": "Sim(3) exp translation: jaxlie_geo vs the textbook closed form",
-                    "lines": sim3_comparison(args.samples, args.seed, sim3_runs),
-                }
+                {"title": title, "lines": sim3_comparison(args.samples, args.seed, sim3_runs)}
             )
     if args.worst:
         print("\nWorst inputs of the cells over the bound:\n")
@@ -364,7 +321,7 @@ def main() -> int:
         {"lib": n, "group": g, "op": op, "dtype": dt, "regime": r, "ulp": e, "over": over}
         for (n, g, op, dt, r), (e, _, _, over) in worst.items()
         if op in M.OPS_IN_REGIME[r]
-    ]  # fmt: skip
+    ]
     data = {
         "machine": common.machine_info("benchmarks.accuracy"),
         "samples": args.samples,
@@ -378,7 +335,7 @@ def main() -> int:
         "cells": cells,
         "elapsed_s": elapsed,
     }
-    print("\n".join(accuracy_tables(data)))
+    print("\n".join(accuracy_table(data)))
     print(f"{elapsed:.0f} s")
     save("accuracy", data, args)
     return 0

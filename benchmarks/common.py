@@ -1,10 +1,10 @@
-"""What every benchmark script shares: the machine facts a run records, the labels and tables
-it prints, its timing loop, its common command-line options and its raw result files.
+"""What every benchmark script shares: the machine facts a run records, the labels and
+tables it prints, one timing harness, the common command-line options and the raw files.
 
-A leaf of the package: it imports nothing of the other modules (and jax only inside the
-functions that time or describe a run). A script measures, prints with the labels here and
-hands its results to ``report.save``, which writes the raw file (``write_raw``) and
-re-renders the page from every raw file.
+A leaf of the package: it imports none of the other modules (and jax only inside the
+functions that time or describe a run). A script builds its cases, times each with
+``compare`` (or ``measure``), and hands its results to ``report.save``, which writes the raw
+file (``write_raw``) and re-renders the page from every raw file.
 """
 
 from __future__ import annotations
@@ -32,9 +32,8 @@ PAGE = HERE / "RESULTS.md"
 #: The groups and operations timed against jaxlie, in the order of the page and the plot.
 GROUPS = ("SO2", "SE2", "SO3", "SE3")
 OPS = ("exp", "log", "compose", "apply", "inverse", "interpolate", "grad")
-
-#: The operations of ``matrix_ops.py`` and of ``kernel_sizes.py``, in the page's order (the
-#: scripts and ``report.py`` read them from here).
+#: Every group, and the operations of ``matrix_ops.py`` and ``kernel_sizes.py``, in order.
+ALL_GROUPS = ("SO2", "SE2", "SO3", "SE3", "Sim3", "SE23")
 MATRIX_OPS = (
     "jac_right",
     "jac_right_inv",
@@ -45,15 +44,6 @@ MATRIX_OPS = (
     "from_matrix_project",
 )
 KERNEL_OPS = ("exp", "log", "jac_right", "jac_right_inv", "jlog", "grad", "from_matrix")
-
-#: jaxlie's layouts: tangent dimension, the tangent's rotation slice, the dimension of the
-#: space acted on and the quaternion slice of the parameters.
-GROUP_INFO = {
-    "SO2": dict(tangent_dim=1, rot=slice(0, 1), space_dim=2, quat=None),
-    "SE2": dict(tangent_dim=3, rot=slice(2, 3), space_dim=2, quat=None),
-    "SO3": dict(tangent_dim=3, rot=slice(0, 3), space_dim=3, quat=slice(0, 4)),
-    "SE3": dict(tangent_dim=6, rot=slice(3, 6), space_dim=3, quat=slice(0, 4)),
-}
 
 
 # --------------------------------------------------------------------------------------
@@ -80,8 +70,12 @@ def version_of(dist: str) -> str:
 
 
 #: What the scripts themselves write: a tree that differs from its commit only there is clean.
-RESULT_FILES = ("benchmarks/raw/", "benchmarks/RESULTS.md", "benchmarks/results.png",
-                "benchmarks/pose_graphs.png")  # fmt: skip
+RESULT_FILES = (
+    "benchmarks/raw/",
+    "benchmarks/RESULTS.md",
+    "benchmarks/results.png",
+    "benchmarks/pose_graphs.png",
+)
 
 
 def _git(*args: str) -> str:
@@ -182,16 +176,11 @@ SUPERSCRIPT = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
 
 def fmt_ns(x: float) -> str:
     """A time in ns with its unit, three significant digits."""
-    if x >= 1e6:
-        return f"{x / 1e6:.2f} ms"
-    if x >= 1e3:
-        return f"{x / 1e3:.2f} µs"
-    if x >= 100:
-        return f"{x:.0f} ns"
-    if x >= 10:
-        return f"{x:.1f} ns"
+    for scale, unit in ((1e6, "ms"), (1e3, "µs")):
+        if x >= scale:
+            return f"{x / scale:.2f} {unit}"
     if x >= 1:
-        return f"{x:.2f} ns"
+        return f"{plain_ns(x)} ns"
     return f"{x:.3g} ns"  # a GPU at 10^6: 0.1 ns/element needs three significant digits
 
 
@@ -200,43 +189,15 @@ def plain_ns(x: float) -> str:
     return f"{x:.0f}" if x >= 100 else f"{x:.1f}" if x >= 10 else f"{x:.2f}"
 
 
-def fmt_n(n: int) -> str:
-    """A batch size as ``10^k`` when it is a power of ten from 1000 up."""
-    e = math.log10(n) if n > 0 else 0
-    if n >= 1000 and abs(e - round(e)) < 1e-9:
-        return f"10^{int(round(e))}"
-    return str(n)
-
-
 def pretty_n(n: int) -> str:
-    """``fmt_n`` with a superscript exponent (10³)."""
-    text = fmt_n(n)
-    if "^" in text:
-        base, exp = text.split("^")
-        return base + exp.translate(SUPERSCRIPT)
-    return text
+    """A batch size, as 10³ when it is a power of ten from 1000 up."""
+    e = round(math.log10(n)) if n > 0 else 0
+    return "10" + str(e).translate(SUPERSCRIPT) if n >= 1000 and n == 10**e else str(n)
 
 
 def fmt_ratio(x: float) -> str:
     """A speed-up as the pages print it: three significant digits (two decimals below 10)."""
     return f"{x:.2f}" if x < 10 else f"{x:.1f}" if x < 100 else f"{x:.0f}"
-
-
-def progress_text(r: dict) -> str:
-    """One measured case on one line, as the scripts print it while they run."""
-    ours, ref = r.get("ours_ns_per_elem"), r.get("ref_ns_per_elem")
-    text = f"ours {fmt_ns(ours) if ours is not None else 'not run'}"
-    if ref is not None:
-        text += f", reference {fmt_ns(ref)}"
-    if r.get("ratio") is not None:
-        text += f", speed-up {r['ratio']:.2f} [{r['ratio_q1']:.2f}–{r['ratio_q3']:.2f}]"
-    compile_ref = r.get("compile_ref_ms")
-    text += f", compile {r['compile_ours_ms']:.0f}" + (
-        f"/{compile_ref:.0f} ms" if compile_ref is not None else " ms"
-    )
-    if r.get("max_rel_diff") is not None:
-        text += f", max rel diff {r['max_rel_diff']:.1e}"
-    return text
 
 
 def sizes(data: dict) -> list:
@@ -251,11 +212,14 @@ def geomean(xs) -> float:
 
 def table(header, rows, align) -> list:
     """Markdown table lines; ``align`` is one of "l"/"r" per column."""
-    out = [
-        "| " + " | ".join(header) + " |",
-        "|" + "|".join("---" if a == "l" else "--:" for a in align) + "|",
-    ]
+    out = ["| " + " | ".join(header) + " |"]
+    out.append("|" + "|".join("---" if a == "l" else "--:" for a in align) + "|")
     return out + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+# --------------------------------------------------------------------------------------
+# Timing
+# --------------------------------------------------------------------------------------
 
 
 def compile_fn(fn, args):
@@ -268,14 +232,40 @@ def compile_fn(fn, args):
 
 
 def run_n(fn, args, n: int) -> float:
-    """Mean seconds per call over n blocking calls."""
+    """Mean seconds per call over n calls, each blocking until its result is ready."""
     import jax
 
-    bur = jax.block_until_ready
     t0 = time.perf_counter()
     for _ in range(n):
-        bur(fn(*args))
+        jax.block_until_ready(fn(*args))
     return (time.perf_counter() - t0) / n
+
+
+def measure(sides, repeats=None, target_s=0.01, budget_s=1.5, min_repeats=3) -> list:
+    """Interleaved timing of (fn, args, seconds of a call already made) sides; returns the
+    seconds per call of each side, one entry per repetition. Repetition i runs the sides in
+    order for even i, reversed for odd i, so that a drift of the machine hits all alike.
+    A measurement lasts about ``target_s``, or a tenth of the slowest side's call (up to
+    1 s), or one call; a fast side is timed again over more calls to size it.
+    ``repeats=None`` chooses from ``min_repeats`` (2 beside a call over 5 s) to 25 within
+    ``budget_s``."""
+    target_s = max(target_s, min(1.0, 0.1 * max(first for _, _, first in sides)))
+    plan = []
+    for fn, args, first in sides:
+        t = first
+        if t < target_s / 10:
+            t = run_n(fn, args, max(1, min(1000, int(target_s / 10 / max(t, 1e-9)))))
+        plan.append((fn, args, max(1, round(target_s / max(t, 1e-9))), t))
+    if repeats is None:
+        one = sum(k * t for *_, k, t in plan)
+        least = min(min_repeats, 2) if max(t for *_, t in plan) > 5.0 else min_repeats
+        repeats = int(min(25, max(least, budget_s / max(one, 1e-9))))
+    times: list = [[] for _ in sides]
+    for i in range(repeats):
+        for j in range(len(plan)) if i % 2 == 0 else reversed(range(len(plan))):
+            fn, args, k, _ = plan[j]
+            times[j].append(run_n(fn, args, k))
+    return times
 
 
 def timed_call(fn, args):
@@ -287,100 +277,22 @@ def timed_call(fn, args):
     return out, time.perf_counter() - t0
 
 
-def calls_per_measurement(fn, args, first_s: float, target_s: float):
-    """(calls so that one measurement lasts about target_s, seconds per call). ``first_s``
-    is the time of a call already made; a fast function is timed again over more calls."""
-    t = first_s
-    if t < target_s / 10:
-        t = run_n(fn, args, max(1, min(1000, int(target_s / 10 / max(t, 1e-9)))))
-    return max(1, int(round(target_s / max(t, 1e-9)))), t
-
-
-def calibrate(fn, args, target_s: float) -> int:
-    """Number of calls so that one measurement lasts about target_s."""
-    return calls_per_measurement(fn, args, run_n(fn, args, 1), target_s)[0]
-
-
-def _alternate(sides, repeats: int) -> list:
-    """Seconds per call of each (fn, args, calls) side, one entry per repetition; repetition
-    i runs the sides in order for even i, reversed for odd i, so that a drift of the machine
-    hits all alike."""
-    times: list = [[] for _ in sides]
-    for i in range(repeats):
-        order = range(len(sides)) if i % 2 == 0 else reversed(range(len(sides)))
-        for j in order:
-            fn, args, calls = sides[j]
-            times[j].append(run_n(fn, args, calls))
-    return times
-
-
-def interleaved(fn_a, fn_b, args, repeats, target_s, budget_s, min_repeats=7):
-    """Interleaved timing of two functions of the same arguments, each measurement about
-    ``target_s`` long; returns (seconds per call of A, of B), one entry per repetition.
-    ``repeats=None`` chooses from ``min_repeats`` to 25 repetitions within ``budget_s``."""
-    n_a = calibrate(fn_a, args, target_s)
-    n_b = calibrate(fn_b, args, target_s)
-    if repeats is None:
-        one = run_n(fn_a, args, n_a) * n_a + run_n(fn_b, args, n_b) * n_b
-        repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
-    t_a, t_b = _alternate([(fn_a, args, n_a), (fn_b, args, n_b)], repeats)
-    return t_a, t_b
-
-
-#: A side slower than this per call lowers ``measure``'s minimum to 2 repetitions.
-SLOW_CALL_S = 5.0
-
-
-def measure(sides, repeats, target_s, budget_s, min_repeats):
-    """Interleaved timing of one or more (fn, args, first call's seconds) sides whose calls
-    may take seconds (a matrix reference beside our kernel); returns the seconds per call of
-    each side, one entry per repetition. Beside a slow side, a measurement lasts a tenth of
-    its call (up to 1 s), so that a fast side's is not a single short call; ``repeats=None``
-    chooses from ``min_repeats`` (2 beside a side over ``SLOW_CALL_S``) to 25 repetitions
-    within ``budget_s``."""
-    target_s = max(target_s, min(1.0, 0.1 * max(first for _, _, first in sides)))
-    plan = [calls_per_measurement(fn, args, first, target_s) for fn, args, first in sides]
-    if repeats is None:
-        one = sum(k * t for k, t in plan)
-        if max(t for _, t in plan) > SLOW_CALL_S:
-            min_repeats = min(min_repeats, 2)
-        repeats = int(min(25, max(min_repeats, budget_s / max(one, 1e-9))))
-    return _alternate([(fn, args, k) for (fn, args, _), (k, _) in zip(sides, plan)], repeats)
-
-
-def quantiles(xs):
-    """First and third quartiles."""
-    xs = sorted(xs)
-    if len(xs) == 1:
-        return xs[0], xs[0]
-    q = statistics.quantiles(xs, n=4, method="inclusive")
-    return q[0], q[2]
-
-
 def paired_stats(t_a, t_b) -> dict:
-    """Medians of two interleaved timing series and the ratio b/a as the median of the paired
-    (same-repetition) ratios, robust to slow drift of the machine, with its quartiles."""
-    paired = [b / a for a, b in zip(t_a, t_b)]
-    q1, q3 = quantiles(paired)
-    return {
-        "median_a": statistics.median(t_a),
-        "median_b": statistics.median(t_b),
-        "ratio": statistics.median(paired),
-        "ratio_q1": q1,
-        "ratio_q3": q3,
-    }
+    """The ratio b/a of two interleaved series as the median of the same-repetition ratios
+    (robust to slow drift of the machine), with its quartiles."""
+    paired = sorted(b / a for a, b in zip(t_a, t_b))
+    q = statistics.quantiles(paired, n=4, method="inclusive") if len(paired) > 1 else paired * 3
+    return {"ratio": statistics.median(paired), "ratio_q1": q[0], "ratio_q3": q[2]}
 
 
-def available_bytes():
+def available_bytes() -> int | None:
     """MemAvailable from /proc/meminfo, or None where there is none."""
     try:
         with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+            line = next(x for x in f if x.startswith("MemAvailable:"))
+        return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
 
 
 def footprint_bytes(compiled) -> int:
@@ -389,111 +301,148 @@ def footprint_bytes(compiled) -> int:
     return m.argument_size_in_bytes + m.output_size_in_bytes + m.temp_size_in_bytes
 
 
+def compare(sides, n: int, args, index: int = 0, min_repeats: int = 3, budget_s: float = 1.5):
+    """Time ``sides``, ``[(fn, inputs), ...]`` (ours first, then the references; a reference
+    may be ``(None, None)``, absent), on a batch of ``n``: each compiled ahead (the order
+    alternating with ``index``), a side whose program would take over 80% of the available
+    memory compiled but not run, a warm call whose output is returned, then ``measure``.
+    Returns (the record, the outputs, None for a side not run). The record holds per side
+    ``<side>_ns_per_elem`` (median), ``compile_<side>_ms``, ``memory_<side>_mb`` and
+    ``<side>_note`` (why it did not run), sides named ``ours`` and ``ref``; and ``ratio``,
+    ``ratio_q1``, ``ratio_q3`` of ref / ours where both ran."""
+    names = ("ours", "ref")
+    order = range(len(sides)) if index % 2 == 0 else reversed(range(len(sides)))
+    compiled: dict = {}
+    for j in order:
+        fn, inputs = sides[j]
+        if fn is not None:
+            compiled[j] = compile_fn(fn, inputs)
+    rec: dict = {}
+    timed, outs = [], [None] * len(sides)
+    for j, (fn, inputs) in enumerate(sides):
+        side = names[j]
+        rec.update({f"{side}_ns_per_elem": None, f"compile_{side}_ms": None})
+        rec.update({f"memory_{side}_mb": None, f"{side}_note": None})
+        if fn is None:
+            continue
+        c, seconds = compiled[j]
+        mem, avail = footprint_bytes(c), available_bytes()
+        rec[f"compile_{side}_ms"], rec[f"memory_{side}_mb"] = seconds * 1e3, mem / 1e6
+        if avail is not None and mem > 0.8 * avail:
+            rec[f"{side}_note"] = (
+                f"not run: needs {mem / 1e9:.1f} GB, {avail / 1e9:.1f} GB available"
+            )
+            continue
+        outs[j], first = timed_call(c, inputs)
+        timed.append((j, (c, inputs, first)))
+    quick = getattr(args, "quick", False)
+    repeats = 3 if quick and args.repeats is None else args.repeats
+    times = (
+        measure(
+            [s for _, s in timed],
+            repeats,
+            0.002 if quick else 0.01,
+            0.1 if quick else budget_s,
+            min_repeats,
+        )
+        if timed
+        else []
+    )
+    for (j, _), t in zip(timed, times):
+        rec[f"{names[j]}_ns_per_elem"] = statistics.median(t) * 1e9 / n
+    rec["repeats"] = len(times[0]) if times else 0
+    rec.update(ratio=None, ratio_q1=None, ratio_q3=None)
+    if len(timed) == 2:
+        rec.update(paired_stats(times[0], times[1]))
+    return rec, outs
+
+
+def max_rel_diff(x, y) -> float:
+    """max |x − y| / (1 + |y|) over the leaves of two pytrees; a non-finite difference or a
+    different shape counts as inf."""
+    import jax
+    import numpy as np
+
+    worst = 0.0
+    for a, b in zip(jax.tree_util.tree_leaves(x), jax.tree_util.tree_leaves(y)):
+        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+        if a.shape != b.shape:
+            return float("inf")
+        d = np.abs(a - b) / (1.0 + np.abs(b))
+        worst = max(worst, float(np.max(np.where(np.isfinite(d), d, np.inf))) if d.size else 0.0)
+    return worst
+
+
 # --------------------------------------------------------------------------------------
-# Command line
+# Command line and raw result files
 # --------------------------------------------------------------------------------------
 
 
-def parse_sizes(p, text: str) -> list:
-    """Comma-separated batch sizes ("1,1e3") -> ints >= 1 (argparse error otherwise)."""
-    sizes = [int(float(s)) for s in text.split(",") if s.strip()]
-    if any(n < 1 for n in sizes):
-        p.error("sizes must be >= 1")
-    return sizes
-
-
-def parse_choices(p, text: str, choices, what: str) -> list:
-    """Comma-separated names, matched to ``choices`` without regard to case."""
-    by_name = {str(c).lower(): c for c in choices}
-    items = [by_name.get(x.strip().lower(), x.strip()) for x in text.split(",") if x.strip()]
-    for x in items:
-        if x not in choices:
-            p.error(f"unknown {what} {x!r}; choose from {tuple(choices)}")
-    return items
-
-
-def parser(description: str, choices: dict, sizes, quick: str, min_repeats: int, sizes_text=None):
-    """An argument parser with the options of the timing scripts: ``--sizes``, one option per
-    entry of ``choices`` (``{"groups": GROUPS, "ops": OPS}``: ``--groups``, ``--ops``, each a
-    comma-separated subset), ``--repeats``, ``--dtype``, ``--quick``,
-    ``--seed`` and the saving options; ``parse`` reads it. ``sizes`` and ``quick`` are the
-    default batch sizes of a full and of a ``--quick`` run (``sizes=None``: the script's
-    own, which ``sizes_text`` describes)."""
+def parser(doc: str, sizes=None, quick=None, **choices) -> argparse.ArgumentParser:
+    """The options every script has: the saving options, and with ``sizes`` (the default
+    batch sizes, comma-separated) ``--sizes``, ``--quick`` (``quick``'s sizes, 3 repeats),
+    ``--repeats``, ``--dtype`` and ``--seed``; one comma-separated option per entry of
+    ``choices`` (``groups=GROUPS``: ``--groups``, a subset). ``parse`` reads it."""
     p = argparse.ArgumentParser(
-        prog="python -m benchmarks." + Path(sys.argv[0]).stem,
-        description=description,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        prog="python -m benchmarks." + Path(sys.argv[0]).stem, description=doc.split("\n\n")[0]
     )
     p.set_defaults(_choices=choices, _sizes=sizes, _quick=quick)
-    p.add_argument(
-        "--sizes",
-        default=None,
-        help=f"comma-separated batch sizes (default {sizes_text or sizes})",
-    )
+    if sizes is not None:
+        p.add_argument("--sizes", default=None, help=f"batch sizes (default {sizes})")
+        p.add_argument("--quick", action="store_true", help=f"sizes {quick}, 3 repeats")
+        p.add_argument("--repeats", type=int, default=None, help="repetitions (default: automatic)")
+        p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
+        p.add_argument("--seed", type=int, default=0)
     for name, options in choices.items():
-        default = ",".join(map(str, options))
-        p.add_argument(f"--{name}", default=default, help="a subset of %(default)s")
-    p.add_argument(
-        "--repeats",
-        type=int,
-        default=None,
-        help=f"interleaved repetitions per case; default: automatic, {min_repeats}..25 within "
-        "a time budget per case",
-    )
-    p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
-    p.add_argument("--quick", action="store_true", help=f"sizes {quick}, few repeats (smoke test)")
-    p.add_argument("--seed", type=int, default=0)
-    add_save_arguments(p)
-    return p
-
-
-def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
-    """Parse the options of ``parser``: ``sizes`` (None for the script's own) and each of the
-    ``choices`` become lists."""
-    args = p.parse_args(argv)
-    sizes = args.sizes or (args._quick if args.quick else args._sizes)
-    args.sizes = None if sizes is None else parse_sizes(p, sizes)
-    for name, options in args._choices.items():
-        picked = parse_choices(p, getattr(args, name), [str(o) for o in options], name[:-1])
-        setattr(args, name, [next(o for o in options if str(o) == x) for x in picked])
-    return args
-
-
-# --------------------------------------------------------------------------------------
-# Raw result files
-# --------------------------------------------------------------------------------------
-
-
-def add_save_arguments(p: argparse.ArgumentParser) -> None:
-    """``--json``, ``--save`` and the options that say where ``--save`` writes."""
+        p.add_argument(
+            f"--{name}", default=",".join(map(str, options)), help="a subset of %(default)s"
+        )
     p.add_argument(
         "--json", default=None, metavar="PATH", help="also write the raw results to PATH"
     )
     p.add_argument(
-        "--save",
-        action="store_true",
-        help="write the results to raw/<machine>/ and regenerate RESULTS.md and its plot",
+        "--save", action="store_true", help="write raw/<machine>/ and regenerate the page"
     )
     p.add_argument(
-        "--machine",
-        default=None,
-        help="machine name for --save (default: derived from the CPU or GPU model)",
+        "--machine", default=None, help="machine name for --save (default: from the hardware)"
     )
-    p.add_argument(
-        "--note",
-        default=None,
-        help="free text about the machine shown on the results page (default: the "
-        "note already saved for the machine)",
-    )
+    p.add_argument("--note", default=None, help="a sentence about the machine for the page")
     p.add_argument(
         "--raw-dir", type=Path, default=RAW_DIR, help="raw results folder (default: %(default)s)"
     )
     p.add_argument(
-        "--page",
-        type=Path,
-        default=PAGE,
-        help="results page to regenerate (default: %(default)s); the plot goes beside it",
+        "--page", type=Path, default=PAGE, help="results page to regenerate (default: %(default)s)"
     )
+    return p
+
+
+def add_save_arguments(p: argparse.ArgumentParser) -> None:
+    """``--json``, ``--save`` and where ``--save`` writes (``--machine``, ``--note``,
+    ``--raw-dir``, ``--page``), on a parser of the script's own."""
+    for action in parser("")._actions:
+        if action.dest in ("json", "save", "machine", "note", "raw_dir", "page"):
+            p._add_action(action)
+
+
+def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
+    """Parse ``parser``'s options: ``sizes`` and each of the ``choices`` become lists (a
+    choice matched without regard to case); x64 is turned on for ``--dtype float64``."""
+    args = p.parse_args(argv)
+    if args._sizes is not None:
+        text = args.sizes or (args._quick if args.quick else args._sizes)
+        args.sizes = [int(float(s)) for s in text.split(",") if s.strip()]
+        if any(n < 1 for n in args.sizes):
+            p.error("sizes must be >= 1")
+        if args.dtype == "float64":
+            importlib.import_module("jax").config.update("jax_enable_x64", True)
+    for name, options in args._choices.items():
+        by_name = {str(o).lower(): o for o in options}
+        picked = [x.strip().lower() for x in getattr(args, name).split(",") if x.strip()]
+        for x in picked:
+            if x not in by_name:
+                p.error(f"unknown {name[:-1]} {x!r}; choose from {tuple(options)}")
+        setattr(args, name, [by_name[x] for x in picked])
+    return args
 
 
 def read_json(path: Path) -> dict:
@@ -512,8 +461,7 @@ def write_raw(kind: str, data: dict, args) -> Path | None:
         write_json(args.json, data)
     if not args.save:
         return None
-    machine = args.machine or machine_name(data["machine"])
-    path = Path(args.raw_dir) / machine / f"{kind}.json"
+    path = Path(args.raw_dir) / (args.machine or machine_name(data["machine"])) / f"{kind}.json"
     note = args.note
     if note is None:
         saved = [read_json(f)["machine"] for f in sorted(path.parent.glob("*.json"))]

@@ -127,22 +127,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         sdist = args.sdist
         if sdist is None:
-            subprocess.run(
-                [
-                    sys.executable,
-                    "-m",
-                    "pip",
-                    "download",
-                    "-q",
-                    "--no-deps",
-                    "--no-binary",
-                    ":all:",
-                    "-d",
-                    tmp,
-                    "jaxlie==1.5.*",
-                ],
-                check=True,
-            )
+            pip = "pip download -q --no-deps --no-binary :all: -d".split()
+            subprocess.run([sys.executable, "-m", *pip, tmp, "jaxlie==1.5.*"], check=True)
             sdist = glob.glob(os.path.join(tmp, "jaxlie-*.tar.gz"))[0]
         with tarfile.open(sdist) as tar:
             members = [m for m in tar.getmembers() if "/tests/" in m.name and m.isfile()]
@@ -157,24 +143,10 @@ def main() -> int:
             f.write(CONFTEST)
         with open(os.path.join(tmp, "pytest.ini"), "w") as f:
             f.write("[pytest]\n")  # keep our pyproject's pytest settings out
-        cmd = [
-            sys.executable,
-            "-m",
-            "pytest",
-            "-q",
-            "-p",
-            "no:cacheprovider",
-            "-c",
-            os.path.join(tmp, "pytest.ini"),
-            "--rootdir",
-            tests,
-            tests,
-            "--ignore",
-            os.path.join(tests, "test_jac_left.py"),
-            "--deselect",
-            "test_jlog.py::test_jlog_runtime",
-            *args.pytest_args,
-        ]
+        ini = os.path.join(tmp, "pytest.ini")
+        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-c", ini]
+        cmd += ["--rootdir", tests, tests, "--ignore", os.path.join(tests, "test_jac_left.py")]
+        cmd += ["--deselect", "test_jlog.py::test_jlog_runtime", *args.pytest_args]
         env = {**os.environ, "JAXLIE_SUITE_TARGET": args.target}
         return subprocess.run(cmd, env=env, cwd=tests).returncode
 
