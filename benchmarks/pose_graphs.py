@@ -1,13 +1,21 @@
 """Pose graphs: ``jaxlie_geo.pose_graph.solve`` beside GTSAM's Levenberg–Marquardt.
 
 The public datasets that ship in the ``gtsam`` wheel (``gtsam.findExampleDataFile``):
-w10000 (TORO 2D), sphere2500 (TORO 3D, edges only), pose3example-grid (g2o 3D) and w20000
-(TORO 2D tags with g2o's information order, edges only). Each file is read by
+w10000 (TORO 2D), sphere2500 (TORO 3D, edges only), pose3example-grid (g2o 3D), w20000
+(TORO 2D tags with g2o's information order, edges only), and two 2D landmark graphs,
+victoriaPark_reduced_1k and cityTrees_reduced_1k (g2o ``EDGE_SE2`` odometry and
+``LANDMARK2`` observations, edges only). Each file is read by
 ``jaxlie_geo.pose_graph.read``; GTSAM's factor graph is built from that same reading
 (``BetweenFactorPose2/3`` with ``noiseModel.Gaussian.Information``, the information moved
 from this library's (v, ω) tangent to GTSAM's (ω, v) for Pose3, and a ``PriorFactor`` with
 σ = 1e-6 on the first pose, as ``solve``'s anchor), so both minimise the same cost from the
-same initial estimate (the file's vertices, or the chained odometry). Final costs are
+same initial estimate (the file's vertices, or the chained odometry, and each landmark where
+its first observation puts it). GTSAM's own readers skip ``LANDMARK2`` records, and its
+Python wheel has no factor with the residual R⁻¹(l − t) − z, so each observation is a
+``CustomFactor`` on (pose, landmark) whose Python callback returns
+``Pose2.transformTo(l) − z`` and its two Jacobians (GTSAM's own), with the same
+``Gaussian.Information``; the time GTSAM spends in those callbacks is measured in a
+separate run and recorded (``gtsam_callback_s``). Final costs are
 GTSAM's ``graph.error`` of each side's estimate, the prior included; ours also reports its
 own cost of its estimate, which agrees to rounding.
 
@@ -39,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import sys
 import time
 
@@ -55,7 +64,11 @@ DATASETS = {
     "sphere2500, load3D's blocks": ("sphere2500", {}, True),
     "pose3example-grid": ("pose3example-grid", {}, False),
     "w20000": ("w20000", {"information_order": "g2o"}, False),
+    "victoriaPark (landmarks)": ("victoriaPark_reduced_1k.g2o", {}, False),
+    "cityTrees (landmarks)": ("cityTrees_reduced_1k.g2o", {}, False),
 }
+#: The linear solvers also timed (warm, fastest of SOLVER_REPEATS) on graphs with landmarks.
+OTHER_SOLVERS, SOLVER_REPEATS = ("cholmod", "qdldl", "dense"), 5
 ANCHOR_SIGMA = 1e-6
 # Warm runs of each side: at least REPEATS (LONG_REPEATS where one GTSAM run takes over
 # LONG_SECONDS), and MIN_SECONDS in all.
@@ -68,8 +81,27 @@ def swap_blocks(information: np.ndarray) -> np.ndarray:
     return information[:, order][:, :, order]
 
 
-def to_gtsam(graph: pose_graph.PoseGraph):
-    """The same cost as a GTSAM factor graph and its initial values."""
+def _observation_error(measured, this, values, jacobians):
+    """A ``CustomFactor``'s unwhitened error T⁻¹ l − z on (pose, landmark), and its
+    Jacobians (GTSAM's ``Pose2.transformTo``) where asked."""
+    T, l = values.atPose2(this.keys()[0]), values.atPoint2(this.keys()[1])
+    if jacobians is None:
+        return T.transformTo(l) - measured
+    H_pose, H_point = np.zeros((2, 3), order="F"), np.zeros((2, 2), order="F")
+    error = T.transformTo(l, H_pose, H_point) - measured
+    jacobians[0], jacobians[1] = H_pose, H_point
+    return error
+
+
+def landmark_key(gtsam, landmark_id: int) -> int:
+    """GTSAM's key of a landmark: the symbol ``l`` and the landmark's id (poses keep
+    theirs)."""
+    return gtsam.symbol("l", landmark_id)
+
+
+def to_gtsam(graph: pose_graph.PoseGraph, error=_observation_error):
+    """The same cost as a GTSAM factor graph and its initial values; ``error`` is the
+    landmark observations' ``CustomFactor`` callback, ``error(z, factor, values, H)``."""
     import gtsam
 
     factors, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -97,6 +129,17 @@ def to_gtsam(graph: pose_graph.PoseGraph):
     k = len(order)
     anchor = gtsam.noiseModel.Diagonal.Sigmas(np.full(k, ANCHOR_SIGMA))
     factors.add(prior(ids[0], pose(graph.poses[0]), anchor))
+    if graph.num_observations and graph.dim != 2:
+        raise ValueError("to_gtsam: landmark observations are built for 2D graphs only")
+    keys = [landmark_key(gtsam, int(m)) for m in graph.landmark_ids]
+    for key, position in zip(keys, graph.landmarks):
+        values.insert(key, np.asarray(position, dtype=float))
+    for (i, m), z, info in zip(
+        graph.observations, graph.observation_measurements, graph.observation_information
+    ):
+        model = gtsam.noiseModel.Gaussian.Information(info)
+        callback = functools.partial(error, np.asarray(z, dtype=float))
+        factors.add(gtsam.CustomFactor(model, [ids[i], keys[m]], callback))
     return factors, values
 
 
@@ -116,12 +159,45 @@ def gtsam_time(factors, values) -> float:
     return time.perf_counter() - start
 
 
-def solve_time(graph) -> tuple[float, pose_graph.Solution]:
+def gtsam_callback_time(graph) -> float:
+    """Seconds one ``optimize()`` spends inside the landmark observations' Python
+    callbacks (a separate run, each callback timed)."""
+    import gtsam
+
+    spent = [0.0]
+
+    def timed(*args):
+        start = time.perf_counter()
+        out = _observation_error(*args)
+        spent[0] += time.perf_counter() - start
+        return out
+
+    factors, values = to_gtsam(graph, timed)
+    gtsam.LevenbergMarquardtOptimizer(factors, values, gtsam.LevenbergMarquardtParams()).optimize()
+    return spent[0]
+
+
+def solve_time(graph, linear_solver="auto") -> tuple[float, pose_graph.Solution]:
     """Wall time of one ``solve`` call, the whole call (its checks of the graph and the
     graph of the result included), and its solution."""
     start = time.perf_counter()
-    solution = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA)
+    solution = pose_graph.solve(graph, anchor_sigma=ANCHOR_SIGMA, linear_solver=linear_solver)
     return time.perf_counter() - start, solution
+
+
+def solver_times(graph, factors) -> dict:
+    """Each of ``OTHER_SOLVERS``: its first call, its fastest warm call and GTSAM's cost of
+    its result."""
+    out = {}
+    for name in OTHER_SOLVERS:
+        cold_s, _ = solve_time(graph, name)
+        runs = [solve_time(graph, name) for _ in range(SOLVER_REPEATS)]
+        out[name] = {
+            "cold_s": cold_s,
+            "warm_s": min(t for t, _ in runs),
+            "final_in_gtsam": factors.error(to_gtsam(runs[0][1].graph)[1]),
+        }
+    return out
 
 
 def run_gtsam(factors, values) -> dict:
@@ -182,6 +258,8 @@ def run_dataset(name: str, gtsam_module) -> dict:
         "dim": graph.dim,
         "poses": graph.num_poses,
         "edges": graph.num_edges,
+        "landmarks": graph.num_landmarks,
+        "observations": graph.num_observations,
         "read_s": read_s,
         "initial_cost": initial,
         "initial_cost_gtsam": factors.error(values),
@@ -204,6 +282,9 @@ def run_dataset(name: str, gtsam_module) -> dict:
         "reaches_gtsam": bool(ours_in_gtsam <= gt["final_cost"] * (1 + 1e-6)),
         "time_ratio": min(ours_s) / min(gtsam_s),
     }
+    if graph.num_landmarks:
+        row["gtsam_callback_s"] = gtsam_callback_time(graph)
+        row["ours_by_solver"] = solver_times(graph, factors)
     print(
         f"{name:30s} N={row['poses']:6d} E={row['edges']:6d}  initial {initial:.6e}  "
         f"GTSAM {gt['final_cost']:.9g} in {gt['iterations']} its, {row['gtsam_s']:.4f} s  |  "
@@ -212,6 +293,17 @@ def run_dataset(name: str, gtsam_module) -> dict:
         f"{'≤' if row['reaches_gtsam'] else '>'} GTSAM × (1 + 1e-6)",
         flush=True,
     )
+    if graph.num_landmarks:
+        others = ", ".join(
+            f"{k} {v['warm_s']:.4f} s warm ({v['cold_s']:.2f} s cold, "
+            f"cost {v['final_in_gtsam']:.9g})"
+            for k, v in row["ours_by_solver"].items()
+        )
+        print(
+            f"{'':30s} M={graph.num_landmarks} K={graph.num_observations}  GTSAM in its "
+            f"Python callbacks {row['gtsam_callback_s']:.4f} s  |  {others}",
+            flush=True,
+        )
     return row
 
 

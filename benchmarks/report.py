@@ -679,7 +679,7 @@ def _accuracy_grid(data: dict, dtype: str) -> list:
 POSE_GRAPH_COLUMNS = """
     dataset | l | {dataset}
     poses | r | {poses:,}
-    edges | r | {edges:,}
+    edges | r | {edges_text}
     initial cost | r | {initial_cost_gtsam:.4g}
     GTSAM final (iterations) | r | {gtsam_final:.9g} ({gtsam_iterations})
     ours final (iterations) | r | {ours_final_in_gtsam:.9g} ({ours_iterations})
@@ -693,7 +693,15 @@ POSE_GRAPH_COLUMNS = """
 
 def pose_graphs_table(data: dict) -> list:
     info, res = data["machine"], data["results"]
-    rows = [{**r, "reaches": "yes" if r["reaches_gtsam"] else "**no**"} for r in res]
+    rows = [
+        {
+            **r,
+            "reaches": "yes" if r["reaches_gtsam"] else "**no**",
+            "edges_text": f"{r['edges']:,}"
+            + (f" + {r['observations']:,} obs." if r.get("observations") else ""),
+        }
+        for r in res
+    ]
     cholmod = info.get("linear_solver", "QDLDL").startswith("CHOLMOD")
     factor = "CHOLMOD through cvxopt {cvxopt}" if cholmod else "QDLDL (qdldl {qdldl})"
     facts = _facts(info, f"jax {{jax}}, GTSAM {{gtsam}}, {factor}, measured {{date}}.")

@@ -162,6 +162,11 @@ SLOW: List[Tuple[str, str]] = [
         "test_pose_graph's solves on one device",
     ),
     (
+        r"test_pose_graph_landmarks\.py::test_landmark_files_reach_gtsam_optimum\[.*\]",
+        "test_pose_graph_landmarks::test_solve_recovers_exact_landmarks (the same factors, "
+        "on a small graph) and test_observation_jacobian_matches_autodiff",
+    ),
+    (
         r"test_docs\.py::test_(site_loads|maths_is|links_resolve|anchors_lead|group_pages|"
         r"site_builds|notebooks_are_pages|notebook_pages_keep|every_public|each_group_page|"
         r"python_blocks|search_works).*",

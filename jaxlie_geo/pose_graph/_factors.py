@@ -1,4 +1,5 @@
-"""Between factors and the anchor, as ``least_squares.Factor`` s with closed-form Jacobians.
+"""Between factors, landmark observations and the anchor, as ``least_squares.Factor`` s
+with closed-form Jacobians.
 
 The residual of an edge (i, j) with measurement Z_ij is the right-minus
 
@@ -15,6 +16,19 @@ e = W r and the blocks W ∂r/∂δ_i, W ∂r/∂δ_j. A robust kernel ρ turns 
 into ½ ρ(‖e‖²); ``least_squares`` solves it in the iteratively reweighted form (Triggs,
 McLauchlan, Hartley and Fitzgibbon, *Bundle adjustment — a modern synthesis*, 2000, §4.3,
 without the second-order correction, as GTSAM does).
+
+A landmark observation (i, m) of z, the position of landmark l (a point of ℝᵈ, d = 2 or
+3) in the frame of pose T_i = (R, t), has the residual
+
+    r = T_i⁻¹ l − z = Rᵀ(l − t) − z,
+
+and, with T ⊕ δ = T exp(δ), δ = (v, ω), and l ⊕ ε = l + ε, the Jacobians (p = T_i⁻¹ l;
+Solà, Deray and Atchuthan 2018, §III, the action row: T exp(δ) moves the point seen as p
+by −v − ω × p)
+
+    ∂r/∂v = −I,    ∂r/∂ω = [p]ₓ (SE3) or (p_y, −p_x)ᵀ (SE2),    ∂r/∂ε = Rᵀ,
+
+whitened by the upper-triangular square root of the observation's information.
 
 The anchor is a prior r_0 = log(P⁻¹ T_0) on the first pose, whitened by 1/σ, which fixes
 the gauge (the graph's cost is invariant under T ↦ S T for any S).
@@ -98,6 +112,15 @@ class Problem(NamedTuple):
     anchor_weight: jax.Array  # () 1/σ
 
 
+class Observations(NamedTuple):
+    """The device arrays of a graph's landmark observations (a pytree)."""
+
+    pose: jax.Array  # (K,) int32
+    landmark: jax.Array  # (K,) int32
+    measurements: jax.Array  # (K, d)
+    sqrt_information: jax.Array  # (K, d, d), upper triangular, WᵀW = Ω
+
+
 def edge_residual(T_i: Any, T_j: Any, data: tuple[Any, jax.Array]) -> jax.Array:
     """e = W log(Z⁻¹ T_i⁻¹ T_j) of one edge, ``data = (Z, W)``."""
     Z, W = data
@@ -111,6 +134,34 @@ def edge_jacobian(T_i: Any, T_j: Any, data: tuple[Any, jax.Array]) -> tuple[jax.
     J_j = E.jlog()  # J_r⁻¹(r)
     J_i = -matmul(J_j, T_j._between(T_i).adjoint())
     return mv(W, E.log()), matmul(W, jnp.concatenate([J_i, J_j], axis=-1))
+
+
+def observation_residual(T: Any, l: jax.Array, data: tuple[jax.Array, jax.Array]) -> jax.Array:
+    """e = W (T⁻¹ l − z) of one observation, ``data = (z, W)``."""
+    z, W = data
+    return mv(W, T.inverse() @ l - z)
+
+
+def observation_jacobian(
+    T: Any, l: jax.Array, data: tuple[jax.Array, jax.Array]
+) -> tuple[jax.Array, jax.Array]:
+    """e and W [−I, ∂r/∂ω, Rᵀ], ``(d,)`` and ``(d, k + d)``."""
+    z, W = data
+    p = T.inverse() @ l
+    if p.shape[-1] == 2:
+        J_w = jnp.stack([p[1], -p[0]])[:, None]
+    else:
+        zero = jnp.zeros_like(p[0])
+        J_w = jnp.stack(
+            [
+                jnp.stack([zero, -p[2], p[1]]),
+                jnp.stack([p[2], zero, -p[0]]),
+                jnp.stack([-p[1], p[0], zero]),
+            ]
+        )
+    R_t = T.rotation().inverse().as_matrix()
+    J = jnp.concatenate([-jnp.eye(p.shape[-1], dtype=p.dtype), J_w, R_t], axis=-1)
+    return mv(W, p - z), matmul(W, J)
 
 
 def anchor_residual(T_0: Any, data: tuple[Any, jax.Array]) -> jax.Array:
@@ -127,10 +178,14 @@ def anchor_jacobian(T_0: Any, data: tuple[Any, jax.Array]) -> tuple[jax.Array, j
 
 
 def factors(
-    G: Type[Group], p: Problem, robust: Optional[RobustKernel]
-) -> tuple[least_squares.Factor, least_squares.Factor]:
-    """The edges as factors on (i, j) of the one variable set (the poses), the anchor as one
-    on pose 0."""
+    G: Type[Group],
+    p: Problem,
+    robust: Optional[RobustKernel],
+    observations: Optional[Observations] = None,
+) -> tuple[least_squares.Factor, ...]:
+    """The edges as factors on (i, j) of variable set 0 (the poses), the anchor as one on
+    pose 0, and the landmark observations (where given) on (i, m) of sets 0 and 1 (the
+    landmarks, an array ``(M, d)``); the robust kernel on the edges and observations."""
     edges = least_squares.Factor(
         edge_residual,
         (0, 0),
@@ -146,7 +201,17 @@ def factors(
         (G(p.anchor[None]), p.anchor_weight[None]),
         jacobian=anchor_jacobian,
     )
-    return edges, anchor
+    if observations is None:
+        return edges, anchor
+    seen = least_squares.Factor(
+        observation_residual,
+        (0, 1),
+        (observations.pose, observations.landmark),
+        (observations.measurements, observations.sqrt_information),
+        None if robust is None else robust.option,
+        jacobian=observation_jacobian,
+    )
+    return edges, anchor, seen
 
 
 def mv(A: jax.Array, x: jax.Array) -> jax.Array:

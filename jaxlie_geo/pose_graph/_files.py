@@ -8,6 +8,8 @@ each edge given by its upper triangle:
 g2o 2D             ``VERTEX_SE2 id x y θ``
                    ``EDGE_SE2 i j dx dy dθ`` + 6 entries ``Ω11 Ω12 Ω13 Ω22 Ω23 Ω33``
                    (row by row, over ``(x, y, θ)``)
+                   ``LANDMARK2 i m zx zy`` + 3 entries ``Ωxx Ωxy Ωyy``: pose i sees
+                   landmark m at z in its frame
 g2o 3D             ``VERTEX_SE3:QUAT id x y z qx qy qz qw``
                    ``EDGE_SE3:QUAT i j x y z qx qy qz qw`` + 21 entries (row by row,
                    over ``(x, y, z, qx, qy, qz)``)
@@ -33,7 +35,13 @@ Conventions, common to all four:
   as the information of ω itself. TORO 3D's block over (roll, pitch, yaw) is likewise
   used as that of ω (equal to first order at small angles); its translation block comes
   first, as HOG-Man reads it (GTSAM's ``load3D`` puts the first block on the rotation).
-- Vertex ids are arbitrary non-negative integers.
+- Vertex ids are arbitrary non-negative integers. Landmark ids (``LANDMARK2``'s m) are
+  their own id space: a landmark may share its number with a pose (cityTrees does).
+- A ``LANDMARK2`` record (i, m) holds z ≈ Rᵢᵀ(l_m − tᵢ), landmark m's position in the
+  frame of pose i, and the information of that 2-vector. The format has no landmark
+  vertex: a landmark's initial position is where its first observation puts it,
+  l_m = tᵢ + Rᵢ z, from pose i's initial estimate. GTSAM's ``readG2o`` and ``load2D``
+  skip these records.
 
 ``TORO``'s ``EQUIV i j`` records (two vertices are the same place; TORO applies them only
 on request, by collapsing the edge between them) and g2o's ``FIX id`` records (a vertex
@@ -68,6 +76,7 @@ class _Tag:
     format: hints.PoseGraphFormat
     is_edge: bool
     numbers: int  # tokens after the tag, ids included
+    is_landmark: bool = False  # a pose–landmark observation
 
 
 _TAGS = {
@@ -75,6 +84,7 @@ _TAGS = {
     for tag in (
         _Tag("VERTEX_SE2", 2, "g2o", False, 1 + 3),
         _Tag("EDGE_SE2", 2, "g2o", True, 2 + 3 + 6),
+        _Tag("LANDMARK2", 2, "g2o", False, 2 + 2 + 3, is_landmark=True),
         _Tag("VERTEX2", 2, "toro", False, 1 + 3),
         _Tag("EDGE2", 2, "toro", True, 2 + 3 + 6),
         _Tag("VERTEX_SE3:QUAT", 3, "g2o", False, 1 + 7),
@@ -232,7 +242,8 @@ def _pose_values(records: _Records, start: int) -> onp.ndarray:
 
 def _information(records: _Records, order: hints.PoseGraphFormat) -> onp.ndarray:
     """The information matrices ``(n, k, k)``, the entries read in ``order``."""
-    k = TANGENT_DIM[records.tag.dim]
+    tag = records.tag
+    k = tag.dim if tag.is_landmark else TANGENT_DIM[tag.dim]
     return _fill(records.values[:, -(k * (k + 1) // 2) :], k, order)
 
 
@@ -267,7 +278,7 @@ def _check_information(records: _Records, order: hints.PoseGraphFormat) -> onp.n
         f"{tag.name}: the information matrix (read in {_NAMES[order]} order) is not "
         f"symmetric positive definite: {info[row].tolist()}"
     )
-    if tag.dim == 2:
+    if tag.dim == 2 and not tag.is_landmark:
         other: hints.PoseGraphFormat = "toro" if order == "g2o" else "g2o"
         if _is_positive_definite(_information(records, other)[row]):
             message += (
@@ -449,6 +460,7 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
     groups, dim = _split_by_tag(text)
     vertices: List[Tuple[onp.ndarray, onp.ndarray, onp.ndarray]] = []  # lines, ids, poses
     edges: List[Tuple[onp.ndarray, ...]] = []  # lines, ij, measurements, information
+    sightings: List[Tuple[onp.ndarray, ...]] = []  # lines, (i, m), z, information
     for name, (numbers, lines) in groups.items():
         if name in _IGNORED:
             low, high = _IGNORED[name]
@@ -460,6 +472,10 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
             continue
         records = _parse_numbers(_TAGS[name], numbers, lines)
         tag = records.tag
+        if tag.is_landmark:
+            information = _check_information(records, "g2o")
+            sightings.append((records.lines, _ids(records, 2), records.values[:, 2:4], information))
+            continue
         if not tag.is_edge:
             vertices.append((records.lines, _ids(records, 1)[:, 0], _pose_values(records, 1)))
             continue
@@ -498,13 +514,7 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
         )
 
     # Ids in order of first appearance: vertex records, then edges (i before j).
-    every = onp.concatenate([v_ids, ij.reshape(-1)])
-    unique, first_seen, inverse = onp.unique(every, return_index=True, return_inverse=True)
-    by_appearance = onp.argsort(first_seen, kind="stable")
-    rank = onp.empty_like(by_appearance)
-    rank[by_appearance] = onp.arange(len(unique))
-    index = rank[inverse.reshape(-1)]
-    ids = unique[by_appearance]
+    ids, index, _ = _by_appearance(onp.concatenate([v_ids, ij.reshape(-1)]))
     edge_index = index[len(v_ids) :].reshape(-1, 2)
 
     width = POSE_WIDTH[dim]
@@ -514,6 +524,7 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
     known[index[: len(v_ids)]] = True
     if not known.all():
         _chain(dim, poses, known, edge_index, measurements)
+    landmarks = {} if not sightings else _landmarks(groups, ids, poses, *_merge(sightings, dim))
     return PoseGraph(
         dim=2 if dim == 2 else 3,
         ids=ids.astype(onp.int64),
@@ -521,7 +532,53 @@ def _read(text: str, information_order: Optional[str]) -> PoseGraph:
         edges=edge_index.astype(onp.int64),
         measurements=measurements,
         information=information,
+        **landmarks,
     )
+
+
+def _landmarks(
+    groups: Dict[str, Tuple[List[int], List[str]]],
+    ids: onp.ndarray,
+    poses: onp.ndarray,
+    lines: onp.ndarray,
+    im: onp.ndarray,
+    z: onp.ndarray,
+    information: onp.ndarray,
+) -> Dict[str, onp.ndarray]:
+    """``PoseGraph``'s landmark attributes from the 2D observation records (in line order):
+    landmark ids in order of first appearance, each landmark placed by its first
+    observation, l = t + R z."""
+    order = onp.argsort(ids, kind="stable")
+    at = onp.minimum(onp.searchsorted(ids[order], im[:, 0]), len(ids) - 1)
+    missing = ids[order][at] != im[:, 0]
+    if missing.any():
+        row = int(missing.argmax())
+        raise _Error(
+            int(lines[row]),
+            f"{_tag_at(groups, int(lines[row]))}: pose {im[row, 0]} is in no vertex or edge",
+        )
+    pose = order[at]
+    landmark_ids, landmark, first = _by_appearance(im[:, 1])
+    x, y, theta = poses[pose[first]].T
+    c, s = onp.cos(theta), onp.sin(theta)
+    zx, zy = z[first].T
+    return {
+        "landmark_ids": landmark_ids,
+        "landmarks": onp.stack([x + c * zx - s * zy, y + s * zx + c * zy], axis=1),
+        "observations": onp.stack([pose, landmark], axis=1),
+        "observation_measurements": z,
+        "observation_information": information,
+    }
+
+
+def _by_appearance(values: onp.ndarray) -> Tuple[onp.ndarray, onp.ndarray, onp.ndarray]:
+    """The distinct values in order of first appearance, each value's index into them, and
+    the position of each distinct value's first appearance."""
+    unique, first_seen, inverse = onp.unique(values, return_index=True, return_inverse=True)
+    by_appearance = onp.argsort(first_seen, kind="stable")
+    rank = onp.empty_like(by_appearance)
+    rank[by_appearance] = onp.arange(len(unique))
+    return unique[by_appearance], rank[inverse.reshape(-1)], first_seen[by_appearance]
 
 
 def _merge(parts: Sequence[Tuple[onp.ndarray, ...]], dim: int) -> Tuple[onp.ndarray, ...]:
@@ -557,7 +614,9 @@ def write(path: PathLike, graph: PoseGraph, *, format: hints.PoseGraphFormat = "
     converted to (roll, pitch, yaw), and read back as unit quaternions that give the same
     rotation to a few ulp (not bit for bit; the sign of the quaternion may flip).
     Information matrices are written as their upper triangle in the format's order (TORO
-    2D: ``xx xy yy θθ xθ yθ``).
+    2D: ``xx xy yy θθ xθ yθ``). A 2D g2o graph's landmark observations follow the edges as
+    ``LANDMARK2`` records; the format stores no landmark positions, so ``read`` places
+    the landmarks again from their first observation.
 
     Args:
         path: the file, created or overwritten.
@@ -568,18 +627,26 @@ def write(path: PathLike, graph: PoseGraph, *, format: hints.PoseGraphFormat = "
 
     Raises:
         ValueError: where ``format`` is neither, an information matrix is not exactly
-            symmetric, or a value is not finite (the file could not be read back).
+            symmetric, a value is not finite (the file could not be read back), or the
+            graph has landmark observations and is not written as 2D g2o.
     """
     if format not in _FORMATS:
         raise ValueError(f"write: format must be 'g2o' or 'toro', got {format!r}")
-    info = onp.asarray(graph.information, dtype=onp.float64)
-    if not onp.array_equal(info, onp.swapaxes(info, -1, -2)):
-        row = int((info != onp.swapaxes(info, -1, -2)).any(axis=(1, 2)).argmax())
+    if graph.num_observations and (format, graph.dim) != ("g2o", 2):
         raise ValueError(
-            f"write: the information matrix of edge {row} is not symmetric (the file "
-            "stores the upper triangle)"
+            f"write: landmark observations are written as g2o 2D LANDMARK2 records; this "
+            f"graph is {graph.dim}D, asked for {format!r}"
         )
-    for name in ("poses", "measurements", "information"):
+    for name, what in (("information", "edge"), ("observation_information", "observation")):
+        info = onp.asarray(getattr(graph, name), dtype=onp.float64)
+        if not onp.array_equal(info, onp.swapaxes(info, -1, -2)):
+            row = int((info != onp.swapaxes(info, -1, -2)).any(axis=(1, 2)).argmax())
+            raise ValueError(
+                f"write: the information matrix of {what} {row} is not symmetric (the file "
+                "stores the upper triangle)"
+            )
+    info = onp.asarray(graph.information, dtype=onp.float64)
+    for name in ("poses", "measurements", "information", "observation_measurements"):
         if not onp.isfinite(getattr(graph, name)).all():
             raise ValueError(f"write: graph.{name} has a value that is not finite")
     dim = graph.dim
@@ -599,5 +666,11 @@ def write(path: PathLike, graph: PoseGraph, *, format: hints.PoseGraphFormat = "
         out.append(f"{vertex_tag} {vertex_id} {' '.join(map(repr, pose))}")
     for (i, j), z, e in zip(graph.edges.tolist(), measurements.tolist(), entries.tolist()):
         out.append(f"{edge_tag} {ids[i]} {ids[j]} {' '.join(map(repr, z + e))}")
+    seen = onp.asarray(graph.observation_information, dtype=onp.float64)[:, [0, 0, 1], [0, 1, 1]]
+    landmark_ids = graph.landmark_ids.tolist()
+    for (i, m), z, e in zip(
+        graph.observations.tolist(), graph.observation_measurements.tolist(), seen.tolist()
+    ):
+        out.append(f"LANDMARK2 {ids[i]} {landmark_ids[m]} {' '.join(map(repr, z + e))}")
     with open(path, "w", encoding="utf-8") as file:
         file.write("\n".join(out) + "\n")

@@ -1,4 +1,5 @@
-"""The pose graph: vertices, relative-pose edges and their information matrices.
+"""The pose graph: vertices, relative-pose edges and their information matrices, and
+optionally point landmarks with the poses' measurements of them.
 
 A leaf module: plain NumPy containers on the host, float64, no JAX tracing. The solver
 converts them to device arrays once per solve.
@@ -7,7 +8,7 @@ converts them to device arrays once per solve.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Literal, Union, cast
+from typing import Any, Literal, Optional, Union, cast
 
 import numpy as onp
 
@@ -21,6 +22,8 @@ Pose = Union[SE2, SE3]
 POSE_WIDTH = {2: 3, 3: 7}
 #: Tangent dimension: SE2 (vx, vy, ω), SE3 (vx, vy, vz, ωx, ωy, ωz).
 TANGENT_DIM = {2: 3, 3: 6}
+#: The default of the landmark attributes: replaced by empty arrays of their shapes.
+_EMPTY: Any = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -40,6 +43,11 @@ class PoseGraph:
     that layout (``from_group``: θ = atan2(sin, cos), the quaternion as the element holds
     it).
 
+    A graph may also hold point landmarks l_m (positions in the world frame, in ℝ^dim) and
+    observations of them: an observation (i, m) holds z, the position of landmark m in
+    the frame of pose i, z ≈ T_world_i⁻¹ l_m = Rᵢᵀ(l_m − tᵢ), and the information of that
+    residual. The five landmark attributes default to empty arrays (a pure pose graph).
+
     Attributes:
         dim: 2 or 3.
         ids: ``(N,)`` int64, the vertex ids used in the file, in the order of ``poses``.
@@ -51,6 +59,13 @@ class PoseGraph:
         information: ``(E, k, k)``, symmetric positive definite, on this library's tangent
             of the residual rᵢⱼ = log(Zᵢⱼ⁻¹ T_world_i⁻¹ T_world_j): SE2 ``(vx, vy, ω)``,
             SE3 ``(vx, vy, vz, ωx, ωy, ωz)`` (translation first), k = 3 or 6.
+        landmark_ids: ``(M,)`` int64, the landmarks' ids in the file (their own id space).
+        landmarks: ``(M, dim)``, the estimate of every landmark's world position.
+        observations: ``(K, 2)`` int64, ``(i, m)``: an index into ``poses`` and one into
+            ``landmarks``.
+        observation_measurements: ``(K, dim)``, z, landmark m in the frame of pose i.
+        observation_information: ``(K, dim, dim)``, symmetric positive definite, on the
+            residual Rᵢᵀ(l_m − tᵢ) − z.
     """
 
     dim: Literal[2, 3]
@@ -59,6 +74,11 @@ class PoseGraph:
     edges: onp.ndarray
     measurements: onp.ndarray
     information: onp.ndarray
+    landmark_ids: onp.ndarray = _EMPTY
+    landmarks: onp.ndarray = _EMPTY
+    observations: onp.ndarray = _EMPTY
+    observation_measurements: onp.ndarray = _EMPTY
+    observation_information: onp.ndarray = _EMPTY
 
     def __post_init__(self) -> None:
         if self.dim not in (2, 3):
@@ -74,7 +94,16 @@ class PoseGraph:
                         f"elements, got {type(value).__name__}"
                     )
                 object.__setattr__(self, name, from_group(value))
+        d = self.dim
+        empty = {"landmark_ids": (0,), "landmarks": (0, d), "observations": (0, 2)}
+        empty.update(observation_measurements=(0, d), observation_information=(0, d, d))
+        for name, shape in empty.items():
+            if getattr(self, name) is None:
+                integer = name in ("landmark_ids", "observations")
+                object.__setattr__(self, name, onp.zeros(shape, onp.int64 if integer else float))
         kinds = {"ids": "i", "poses": "f", "edges": "i", "measurements": "f", "information": "f"}
+        kinds.update(landmark_ids="i", landmarks="f", observations="i")
+        kinds.update(observation_measurements="f", observation_information="f")
         for name, kind in kinds.items():  # integers to int64, reals to float64
             array = onp.asarray(getattr(self, name))
             if array.dtype.kind not in ("iu" if kind == "i" else "iuf"):
@@ -84,6 +113,9 @@ class PoseGraph:
         n, e = len(self.ids), len(self.edges)
         shapes = {"ids": (n,), "poses": (n, w), "edges": (e, 2), "measurements": (e, w)}
         shapes["information"] = (e, k, k)
+        m, o = len(self.landmark_ids), len(self.observations)
+        shapes.update(landmark_ids=(m,), landmarks=(m, d), observations=(o, 2))
+        shapes.update(observation_measurements=(o, d), observation_information=(o, d, d))
         for name, shape in shapes.items():
             array = getattr(self, name)
             if array.shape != shape:
@@ -96,11 +128,20 @@ class PoseGraph:
                 f"PoseGraph.edges: indices must lie in [0, {n}), "
                 f"got {self.edges.min()}..{self.edges.max()}"
             )
-        info = self.information
-        asymmetry = onp.abs(info - onp.swapaxes(info, -1, -2)).max(axis=(-2, -1), initial=0.0)
-        bad = onp.flatnonzero(asymmetry > 1e-12 * onp.abs(info).max(axis=(-2, -1), initial=0.0))
-        if len(bad):
-            raise ValueError(f"PoseGraph.information: edge {bad[0]} is not symmetric")
+        for column, count in ((0, n), (1, m)):
+            index = self.observations[:, column]
+            if o and (index.min() < 0 or index.max() >= count):
+                raise ValueError(
+                    f"PoseGraph.observations: column {column} must lie in [0, {count}), "
+                    f"got {index.min()}..{index.max()}"
+                )
+        for name, what in (("information", "edge"), ("observation_information", "observation")):
+            info = getattr(self, name)
+            asymmetry = onp.abs(info - onp.swapaxes(info, -1, -2)).max(axis=(-2, -1), initial=0.0)
+            scale = onp.abs(info).max(axis=(-2, -1), initial=0.0)
+            bad = onp.flatnonzero(asymmetry > 1e-12 * scale)
+            if len(bad):
+                raise ValueError(f"PoseGraph.{name}: {what} {bad[0]} is not symmetric")
 
     @property
     def group(self) -> type[SE2] | type[SE3]:
@@ -115,6 +156,14 @@ class PoseGraph:
     def num_edges(self) -> int:
         return len(self.edges)
 
+    @property
+    def num_landmarks(self) -> int:
+        return len(self.landmark_ids)
+
+    @property
+    def num_observations(self) -> int:
+        return len(self.observations)
+
     def pose_group(self) -> Pose:
         """The poses as a group element of batch ``(N,)``, with NumPy float64 parameters
         (quaternions as stored: ``normalize()`` them for a file's few-digit ones)."""
@@ -124,11 +173,17 @@ class PoseGraph:
         """The measurements as a group element of batch ``(E,)``."""
         return to_group(self.dim, self.measurements)
 
-    def with_poses(self, poses: Pose | onp.ndarray) -> PoseGraph:
+    def with_poses(
+        self, poses: Pose | onp.ndarray, landmarks: Optional[onp.ndarray] = None
+    ) -> PoseGraph:
         """The same graph with other pose estimates (a group element of batch ``(N,)`` or an
-        array in the vertex layout), e.g. a solver's result, ready to be written."""
+        array in the vertex layout), e.g. a solver's result, ready to be written; and other
+        landmark positions ``(M, dim)`` where given."""
         array = poses if isinstance(poses, onp.ndarray) else from_group(poses)
-        return dataclasses.replace(self, poses=onp.asarray(array, dtype=onp.float64))
+        landmarks = self.landmarks if landmarks is None else onp.asarray(landmarks, onp.float64)
+        return dataclasses.replace(
+            self, poses=onp.asarray(array, dtype=onp.float64), landmarks=landmarks
+        )
 
 
 def to_group(dim: int, rows: onp.ndarray) -> Pose:

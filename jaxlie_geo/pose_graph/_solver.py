@@ -1,6 +1,7 @@
 """Gauss–Newton and Levenberg–Marquardt on a pose graph: the graph as a problem of
-``jaxlie_geo.least_squares`` (one variable set, the poses; the edges and the anchor as two
-factors with closed-form Jacobians), solved in one compiled loop traced once per graph size
+``jaxlie_geo.least_squares`` (one variable set, the poses, and a second, the landmarks,
+where the graph has them; the edges, the anchor and the landmark observations as factors
+with closed-form Jacobians), solved in one compiled loop traced once per graph size
 (number of poses and edges) and linear solver, and reused by every later solve of a graph
 of that size.
 """
@@ -21,7 +22,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from .. import _sparse, hints, least_squares
 from .._record import Record, Solve, callback, check_options, recording
 from .._xla import x64
-from ._factors import Group, Problem, RobustKernel, factors
+from ._factors import Group, Observations, Problem, RobustKernel, factors
 from ._graph import TANGENT_DIM, PoseGraph, from_group, to_group
 
 #: ``"auto"`` takes the banded Cholesky (when neither sparse package is installed) only if
@@ -36,32 +37,56 @@ class Solution(Solve):
     ½ ‖r_0/σ‖²), and
 
     Attributes:
-        graph: the input graph with the optimised poses (``graph.poses``), ready to write.
+        graph: the input graph with the optimised poses (``graph.poses``) and landmarks
+            (``graph.landmarks``), ready to write.
         poses: the optimised poses, a group element of batch ``(N,)``, float64.
+        landmarks: the optimised landmark positions, ``(M, dim)`` float64 (``(0, dim)``
+            for a graph without landmarks).
     """
 
     graph: PoseGraph
     poses: Group
+    landmarks: onp.ndarray
+
+
+def _sqrt_information(information: onp.ndarray, what: str) -> onp.ndarray:
+    """W, upper triangular with WᵀW = Ω, of every matrix ``(·, k, k)``."""
+    info = 0.5 * (information + onp.swapaxes(information, -1, -2))
+    try:
+        return onp.swapaxes(onp.linalg.cholesky(info), -1, -2)
+    except onp.linalg.LinAlgError:
+        bad = int(onp.argmin(onp.linalg.eigvalsh(info)[:, 0]))
+        raise ValueError(
+            f"solve: the information of {what} {bad} (of {len(info)}) is not positive definite"
+        ) from None
+
+
+def _observations(graph: PoseGraph) -> tuple[Optional[Observations], Optional[jax.Array]]:
+    """Device arrays of the landmark observations and the landmarks, float64; None for a
+    graph without landmarks."""
+    if not graph.num_landmarks:
+        return None, None
+    W = _sqrt_information(graph.observation_information, "observation")
+    o = Observations(
+        jnp.asarray(graph.observations[:, 0].astype(onp.int32)),
+        jnp.asarray(graph.observations[:, 1].astype(onp.int32)),
+        jnp.asarray(graph.observation_measurements, jnp.float64),
+        jnp.asarray(W),
+    )
+    return o, jnp.asarray(graph.landmarks, jnp.float64)
 
 
 def _problem(
     graph: PoseGraph, anchor_sigma: float, devices: Optional[Sequence[Any]]
 ) -> tuple[Problem, jax.Array]:
-    """Device arrays of the graph, float64; edges padded to a multiple of the devices and
-    sharded over them."""
+    """Device arrays of the graph's poses and edges, float64; edges padded to a multiple of
+    the devices and sharded over them."""
     G = graph.group
     params = onp.asarray(to_group(graph.dim, graph.poses).normalize().parameters(), onp.float64)
     meas = onp.asarray(
         to_group(graph.dim, graph.measurements).normalize().parameters(), onp.float64
     )
-    info = 0.5 * (graph.information + onp.swapaxes(graph.information, -1, -2))
-    try:
-        W = onp.swapaxes(onp.linalg.cholesky(info), -1, -2)
-    except onp.linalg.LinAlgError:
-        bad = int(onp.argmin(onp.linalg.eigvalsh(info)[:, 0]))
-        raise ValueError(
-            f"solve: the information of edge {bad} (of {len(info)}) is not positive definite"
-        ) from None
+    W = _sqrt_information(graph.information, "edge")
     edge_i, edge_j = graph.edges[:, 0].astype(onp.int32), graph.edges[:, 1].astype(onp.int32)
     mesh = None
     if devices is not None and len(devices) > 1:
@@ -109,12 +134,15 @@ def solve(
     devices: Optional[Sequence[Any]] = None,
     progress: bool = False,
 ) -> Solution:
-    """Minimise ½ Σ_edges ρ(‖Wᵢⱼ rᵢⱼ‖²) + ½ ‖log(P⁻¹ T₀)/σ‖² over the poses.
+    """Minimise ½ Σ_edges ρ(‖Wᵢⱼ rᵢⱼ‖²) + ½ ‖log(P⁻¹ T₀)/σ‖² + ½ Σ_observations
+    ρ(‖Wᵢₘ rᵢₘ‖²) over the poses (and the landmarks).
 
     rᵢⱼ = log(Zᵢⱼ⁻¹ Tᵢ⁻¹ Tⱼ) and Wᵢⱼ is the upper-triangular square root of the
     edge's information (WᵢⱼᵀWᵢⱼ = Ωᵢⱼ); ρ(s) = s without a robust kernel; P is the
     first pose's initial value. This is the cost GTSAM's ``BetweenFactor`` and
-    ``PriorFactor`` define, in this library's tangent order. Computed in float64 whatever
+    ``PriorFactor`` define, in this library's tangent order. A graph with landmarks adds
+    its observations, rᵢₘ = Tᵢ⁻¹ lₘ − zᵢₘ = Rᵢᵀ(lₘ − tᵢ) − zᵢₘ, whitened likewise, and
+    optimises the landmark positions lₘ with the poses. Computed in float64 whatever
     ``jax_enable_x64`` says.
 
     Arguments:
@@ -131,7 +159,8 @@ def solve(
             linearisation stays on the device, the factorisation runs on the host), else
             ``"banded"`` when H's band is narrow (a graph without loop closures), else
             PCG.
-        robust: ``Huber(k)`` or ``Cauchy(k)``, on every edge (not the anchor).
+        robust: ``Huber(k)`` or ``Cauchy(k)``, on every edge and landmark observation (not
+            the anchor).
         anchor_sigma: σ of the prior that holds the first pose at its initial value.
         max_iterations: the most accepted steps.
         tolerance: stop when a step's relative decrease of the cost, or the decrease the
@@ -146,7 +175,8 @@ def solve(
         cg_tolerance: PCG's relative residual.
         cg_max_iterations: PCG's iteration limit.
         devices: several devices to shard the edges over (residuals, Jacobians and the
-            conjugate-gradient products); ``None`` for the default device.
+            conjugate-gradient products; landmark observations are replicated); ``None``
+            for the default device.
         progress: draw a progress line on stderr.
 
     Returns:
@@ -172,10 +202,14 @@ def solve(
     solver = _linear_solver(linear_solver, graph)
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, devices)
+        o, landmarks = _observations(graph)
+        if o is not None and devices is not None:
+            o, landmarks = jax.device_put((o, landmarks), poses.sharding)
         G = graph.group
+        variables = (G(poses),) if landmarks is None else (G(poses), landmarks)
         with recording(record):
             sol = least_squares.solve(
-                factors(G, p, robust), (G(poses),), method=method,
+                factors(G, p, robust, o), variables, method=method,
                 max_iterations=max_iterations, tolerance=tolerance,
                 initial_damping=initial_damping, diagonal_damping=diagonal_damping,
                 linear_solver=solver,
@@ -184,6 +218,11 @@ def solve(
             )  # fmt: skip
             sol = jax.block_until_ready(sol)  # every callback has run
         T = G(jax.device_get(sol.variables[0].parameters()))
+        L = (
+            onp.asarray(jax.device_get(sol.variables[1]), onp.float64)
+            if landmarks is not None
+            else graph.landmarks
+        )
         iterations = int(sol.iterations)
     reason = least_squares.StopReason(int(sol.stop_reason))
     record.close(reason.description)
@@ -195,19 +234,22 @@ def solve(
         time=time.perf_counter() - start,
         stop_reason=reason.description,
         converged=bool(sol.converged),
-        graph=graph.with_poses(from_group(T)),
+        graph=graph.with_poses(from_group(T), L),
         poses=T,
+        landmarks=L,
     )
 
 
 def _linear_solver(name: hints.LinearSolver, graph: PoseGraph) -> hints.LinearSolver:
     """``least_squares.solve``'s name for ``name``: ``"cholesky"`` is CHOLMOD if cvxopt
-    imports, else QDLDL; ``"auto"`` is ``"cholesky"`` if either imports, else the banded
-    Cholesky if H's band is narrow (at most ``BAND_FILL_LIMIT`` times its stored entries),
-    else PCG."""
+    imports, else QDLDL; ``"auto"`` is ``"cholesky"`` if either imports, else (for a graph
+    without landmarks) the banded Cholesky if H's band is narrow (at most
+    ``BAND_FILL_LIMIT`` times its stored entries), else PCG."""
     if name == "auto":
         if _sparse.installed("cholmod") or _sparse.installed("qdldl"):
             name = "cholesky"
+        elif graph.num_landmarks:  # the landmarks' columns follow every pose's: no band
+            name = "pcg"
         else:
             k, n = TANGENT_DIM[graph.dim], graph.num_poses
             i, j = onp.sort(graph.edges, axis=1).T
@@ -221,32 +263,42 @@ def _linear_solver(name: hints.LinearSolver, graph: PoseGraph) -> hints.LinearSo
 
 
 def _check_connected(graph: PoseGraph) -> None:
-    """Every pose must be joined to the first through edges: the anchor fixes only the
-    first pose's component, and any other leaves H singular."""
+    """Every pose and landmark must be joined to the first pose through edges and
+    observations: the anchor fixes only the first pose's component, and any other leaves H
+    singular."""
     sparse = importlib.import_module("scipy.sparse")  # installed with jax, which needs it
     csgraph = importlib.import_module("scipy.sparse.csgraph")
-    n = graph.num_poses
-    i, j = graph.edges[:, 0], graph.edges[:, 1]
-    adjacency = sparse.coo_matrix((onp.ones(len(i)), (i, j)), shape=(n, n))
+    n, m = graph.num_poses, graph.num_landmarks
+    i = onp.concatenate([graph.edges[:, 0], graph.observations[:, 0]])
+    j = onp.concatenate([graph.edges[:, 1], n + graph.observations[:, 1]])
+    adjacency = sparse.coo_matrix((onp.ones(len(i)), (i, j)), shape=(n + m, n + m))
     count, labels = csgraph.connected_components(adjacency, directed=False)
     if count > 1:
         loose = int(onp.flatnonzero(labels != labels[0])[0])
+        what = (
+            f"pose {loose} (id {graph.ids[loose]})"
+            if loose < n
+            else f"landmark {loose - n} (id {graph.landmark_ids[loose - n]})"
+        )
         raise ValueError(
-            f"solve: the graph has {count} connected components; pose {loose} (id "
-            f"{graph.ids[loose]}) is not joined to the first pose by any chain of edges"
+            f"solve: the graph has {count} connected components; {what} is not joined to "
+            "the first pose by any chain of edges and observations"
         )
 
 
 def graph_cost(
     graph: PoseGraph, *, robust: Optional[RobustKernel] = None, anchor_sigma: float = 1e-6
 ) -> float:
-    """The cost ``solve`` minimises, at ``graph.poses`` (the anchor at the first pose
-    itself, so it adds 0): ½ Σ ρ(‖Wᵢⱼ rᵢⱼ‖²), float64."""
+    """The cost ``solve`` minimises, at ``graph.poses`` and ``graph.landmarks`` (the anchor
+    at the first pose itself, so it adds 0): ½ Σ ρ(‖Wᵢⱼ rᵢⱼ‖²) + ½ Σ ρ(‖Wᵢₘ rᵢₘ‖²),
+    float64."""
     with x64(True):
         p, poses = _problem(graph, anchor_sigma, None)
-        return float(_cost_jit(robust, graph.group(poses), p))
+        o, landmarks = _observations(graph)
+        return float(_cost_jit(robust, graph.group(poses), p, o, landmarks))
 
 
 @functools.partial(jax.jit, static_argnums=(0,))
-def _cost_jit(robust, poses, p):
-    return least_squares.cost(factors(type(poses), p, robust), (poses,))
+def _cost_jit(robust, poses, p, o, landmarks):
+    variables = (poses,) if landmarks is None else (poses, landmarks)
+    return least_squares.cost(factors(type(poses), p, robust, o), variables)
