@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from benchmarks.bundle_adjustment import gtsam_problem
 from jaxlie_geo import SE3, bundle
 from jaxlie_geo import least_squares as ls
 
@@ -22,29 +23,9 @@ HUBER = ("huber", 2.0)
 
 
 def _gtsam_problem(problem: bundle.Problem, robust):
-    """GTSAM's graph and values for the same cost: cameras turned to GTSAM's z-forward,
-    camera-to-world pose (R_gtsam = Rᵀ diag(1, −1, −1), t_gtsam = −Rᵀt), y negated."""
-    R = np.asarray(problem.cameras.rotation().as_matrix())
-    t = np.asarray(problem.cameras.translation())
-    K, X = np.asarray(problem.intrinsics), np.asarray(problem.points)
-    values, graph = gtsam.Values(), gtsam.NonlinearFactorGraph()
-    for i in range(len(K)):
-        pose = gtsam.Pose3(gtsam.Rot3(R[i].T @ np.diag([1.0, -1.0, -1.0])), -R[i].T @ t[i])
-        calibration = gtsam.Cal3Bundler(K[i, 0], K[i, 1], K[i, 2], 0.0, 0.0)
-        values.insert(gtsam.symbol("c", i), gtsam.PinholeCameraCal3Bundler(pose, calibration))
-    for j in range(len(X)):
-        values.insert(gtsam.symbol("p", j), X[j])
-    noise = gtsam.noiseModel.Isotropic.Sigma(2, 1.0)
-    if robust is not None:
-        huber = gtsam.noiseModel.mEstimator.Huber.Create(robust[1])
-        noise = gtsam.noiseModel.Robust.Create(huber, noise)
-    z = np.asarray(problem.observations) * [1.0, -1.0]
-    for o, (i, j) in enumerate(
-        zip(np.asarray(problem.camera_index), np.asarray(problem.point_index))
-    ):
-        key_c, key_p = gtsam.symbol("c", int(i)), gtsam.symbol("p", int(j))
-        graph.add(gtsam.GeneralSFMFactorCal3Bundler(z[o], noise, key_c, key_p))
-    return graph, values
+    """GTSAM's graph and values for the same cost (the benchmark's conversion: cameras turned
+    to GTSAM's z-forward, camera-to-world pose, the image y axis negated)."""
+    return gtsam_problem(gtsam, problem, robust)
 
 
 def test_reader_counts_match_gtsam() -> None:
