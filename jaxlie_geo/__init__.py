@@ -7,6 +7,7 @@ closed-form vector kernels, ``hat``/``vee``, geodesics and batch indexing.
 from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
+from . import bundle as bundle
 from . import hints as hints
 from . import interop as interop
 from . import jacobians as jacobians
@@ -52,6 +53,7 @@ __all__ = [
     "between",
     "stack",
     "check_valid",
+    "bundle",
     "hints",
     "interop",
     "jacobians",

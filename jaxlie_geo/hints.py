@@ -16,7 +16,7 @@ Scalar = Union[float, Array]
 SolverMethod = Literal["lm", "gn"]
 """A least-squares solver's iteration: Levenberg–Marquardt or Gauss–Newton."""
 
-LinearSolver = Literal["auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg"]
+LinearSolver = Literal["auto", "cholesky", "cholmod", "qdldl", "banded", "dense", "pcg", "schur"]
 """How a least-squares step's normal equations are solved (``pose_graph.solve``)."""
 
 Frame = Literal["body", "world"]

@@ -588,6 +588,264 @@ def _host_pattern(factors, variables, backend: str) -> _HostPattern:
     return _PATTERNS[key]
 
 
+# -- Schur complement ------------------------------------------------------------------
+#
+# ``linear_solver="schur"``: the elements of one variable set E (a bundle adjustment's
+# points) are eliminated first. Where every factor reads at most one element of E, H's block
+# on E is block diagonal, V = diag(V_p); with W the coupling to the other unknowns R and A
+# their block, (H + diag(d)) δ = −g is solved by the reduced system
+#   (Ã − W Ṽ⁻¹ Wᵀ) δ_R = −g_R + W Ṽ⁻¹ g_E,   δ_E = −Ṽ⁻¹ (g_E + Wᵀ δ_R)
+# (Ã, Ṽ damped), the reduced matrix dense and factorised by Cholesky on the device
+# (Triggs, McLauchlan, Hartley, Fitzgibbon, *Bundle Adjustment — A Modern Synthesis*, 2000,
+# §6.1). W Ṽ⁻¹ Wᵀ = Σ_p G G ᵀ over the pairs of factors that share an element p, with
+# G_a = W_a L_p⁻ᵀ (Ṽ_p = L_p L_pᵀ): the pairs are listed once per structure on the host and
+# summed in chunks per pair of R-column tuples (cameras, for bundle adjustment).
+
+#: Pairs of factors summed at once in the reduced matrix.
+SCHUR_CHUNK = 1 << 16
+
+
+def _eliminable(factors, variables) -> Optional[int]:
+    """The set ``"schur"`` eliminates: of those read by some factor and by none at two of its
+    arguments, the one with the most unknowns (None if there is none)."""
+    best, size = None, 0
+    for s, v in enumerate(variables):
+        counts = [f.sets.count(s) for f in factors]
+        n = _count(v) * _tangent_dim(v)
+        if max(counts, default=0) == 1 and n > size:
+            best, size = s, n
+    return best
+
+
+@dataclasses.dataclass(frozen=True)
+class _SchurPattern:
+    """The layout of the elimination of set ``eliminated``, built once per structure from the
+    factors' concrete indices. Reduced coordinates: the flat tangent without E's, plus one
+    padding coordinate (``reduced``) that padded columns point to. Hashable by identity, as
+    ``_HostPattern``."""
+
+    eliminated: int
+    reduced: int  # N_R; the padding coordinate
+    # Per factor set: the positions of its R columns and of its E columns among its K, its
+    # rows' R-column tuple ids and those tuples' reduced columns, and (for one that reads E)
+    # the offset of its rows among the E rows.
+    r_pos: Tuple[onp.ndarray, ...]
+    e_pos: Tuple[Optional[onp.ndarray], ...]
+    tuple_ids: Tuple[onp.ndarray, ...]
+    tuple_cols: Tuple[onp.ndarray, ...]
+    row_offset: Tuple[Optional[int], ...]
+    # The rows that read E (every such factor set's, in order, R columns padded to K_max):
+    rows_cols: onp.ndarray  # (rows, K_max) reduced columns
+    rows_element: onp.ndarray  # (rows,) the element of E
+    rows_tuple: onp.ndarray  # (rows,) R-column tuple id among these rows
+    rows_tuple_cols: onp.ndarray  # (T, K_max)
+    # Pairs a < b of rows on one element, sorted by their pair of tuples, in chunks:
+    pairs: onp.ndarray  # (chunks, 3, SCHUR_CHUNK): row a, row b, pair-of-tuples id
+    pair_cols: onp.ndarray  # (U, 2, K_max): the reduced columns of each pair of tuples
+
+    __hash__ = object.__hash__
+    __eq__ = object.__eq__  # type: ignore[assignment]
+
+    @staticmethod
+    def build(factors, variables, e: int) -> "_SchurPattern":
+        offsets = _offsets(variables)
+        start, stop = offsets[e], offsets[e + 1]
+        N_R = offsets[-1] - (stop - start)
+        r_pos: list = []
+        e_pos: list = []
+        tuple_ids: list = []
+        tuple_cols: list = []
+        row_offset: list = []
+        rows_cols: list = []
+        rows_element: list = []
+        for f in factors:
+            c = onp.concatenate(
+                [
+                    offsets[s]
+                    + onp.asarray(idx)[:, None] * _tangent_dim(variables[s])
+                    + onp.arange(_tangent_dim(variables[s]))
+                    for s, idx in zip(f.sets, f.indices)
+                ],
+                axis=1,
+            )
+            in_e = (c[0] >= start) & (c[0] < stop) if len(c) else onp.zeros(c.shape[1], bool)
+            rp = onp.flatnonzero(~in_e)
+            r_pos.append(rp)
+            rc = onp.where(c[:, rp] >= stop, c[:, rp] - (stop - start), c[:, rp])
+            unique, ids = onp.unique(rc, axis=0, return_inverse=True)
+            tuple_ids.append(ids.ravel().astype(onp.int32))
+            tuple_cols.append(unique)
+            if in_e.any():
+                e_pos.append(onp.flatnonzero(in_e))
+                row_offset.append(sum(len(r) for r in rows_cols))
+                rows_cols.append(rc)
+                k = int(in_e.sum())
+                rows_element.append((c[:, onp.flatnonzero(in_e)[0]] - start) // k)
+            else:
+                e_pos.append(None)
+                row_offset.append(None)
+        K = max(r.shape[1] for r in rows_cols)
+        padded = onp.concatenate(
+            [onp.pad(r, ((0, 0), (0, K - r.shape[1])), constant_values=N_R) for r in rows_cols]
+        )
+        element = onp.concatenate(rows_element).astype(onp.int64)
+        unique_rows, row_tuple = onp.unique(padded, axis=0, return_inverse=True)
+        row_tuple = row_tuple.ravel()
+        # Every pair a < b of rows on one element, by track length.
+        order = onp.argsort(element, kind="stable")
+        _, first, length = onp.unique(element[order], return_index=True, return_counts=True)
+        pa, pb = [], []
+        for L in onp.unique(length):
+            if L < 2:
+                continue
+            starts = first[length == L]
+            i, j = onp.triu_indices(int(L), 1)
+            pa.append(order[starts[:, None] + i].ravel())
+            pb.append(order[starts[:, None] + j].ravel())
+        a = onp.concatenate(pa) if pa else onp.zeros(0, onp.int64)
+        b = onp.concatenate(pb) if pb else onp.zeros(0, onp.int64)
+        T = len(unique_rows)
+        keys, pair_id = onp.unique(row_tuple[a] * T + row_tuple[b], return_inverse=True)
+        pair_id = pair_id.ravel()
+        sort = onp.argsort(pair_id, kind="stable")
+        n = len(a)
+        chunk = min(SCHUR_CHUNK, max(n, 1))
+        chunks = max(-(-n // chunk), 1)
+        flat = onp.empty((3, chunks * chunk), onp.int32)
+        flat[0], flat[1] = len(padded), len(padded)  # a zero row
+        flat[2] = len(keys)  # a discarded pair id
+        flat[0, :n], flat[1, :n], flat[2, :n] = a[sort], b[sort], pair_id[sort]
+        pairs = flat.reshape(3, chunks, chunk).transpose(1, 0, 2)
+        pair_cols = onp.stack([unique_rows[keys // T], unique_rows[keys % T]], axis=1)
+        return _SchurPattern(
+            e, N_R, tuple(r_pos), tuple(e_pos), tuple(tuple_ids), tuple(tuple_cols),
+            tuple(row_offset), padded.astype(onp.int32), element.astype(onp.int32),
+            row_tuple.astype(onp.int32), unique_rows.astype(onp.int32), pairs, pair_cols,
+        )  # fmt: skip
+
+
+def _schur_pattern(factors, variables) -> _SchurPattern:
+    """The ``_SchurPattern`` of a structure, built once (keyed as ``_host_pattern``)."""
+    for f in factors:
+        if any(isinstance(i, jax.core.Tracer) for i in f.indices):
+            raise ValueError(
+                "least_squares.solve: linear_solver='schur' lists the pairs of factors that "
+                "share an eliminated element on the host and needs concrete index arrays; "
+                "close over them instead of passing them through jit or vmap"
+            )
+    e = _eliminable(factors, variables)
+    if e is None:
+        raise ValueError(
+            "least_squares.solve: linear_solver='schur' needs a variable set that every "
+            "factor reads at most once (its elements' Hessian blocks independent); none is"
+        )
+    key = (
+        "schur",
+        tuple((type(v).__name__, _count(v), _tangent_dim(v)) for v in variables),
+        tuple((f.sets, tuple(hash(onp.asarray(i).tobytes()) for i in f.indices)) for f in factors),
+    )
+    if key not in _PATTERNS:
+        _PATTERNS[key] = _SchurPattern.build(factors, variables, e)
+    return _PATTERNS[key]
+
+
+class _SchurSystem(NamedTuple):
+    """What ``"schur"`` keeps at one point: A = H's block on R, dense ``(N_R + 1, N_R + 1)``
+    (the padding coordinate last), V ``(n_E, k, k)`` and the E rows' W_a = M_Rᵀ M_E
+    ``(rows, K_max, k)``."""
+
+    A: jax.Array
+    V: jax.Array
+    W: jax.Array
+
+
+def _schur_system(pattern: _SchurPattern, factors, blocks, variables) -> _SchurSystem:
+    n = pattern.reduced + 1
+    dtype = _dtype(variables)
+    A = jnp.zeros((n, n), dtype)
+    W = jnp.zeros(
+        (
+            len(pattern.rows_cols),
+            pattern.rows_cols.shape[1],
+            _tangent_dim(variables[pattern.eliminated]),
+        ),
+        dtype,
+    )
+    for j, b in enumerate(blocks):
+        rp = pattern.r_pos[j]
+        MR = b.M[:, :, rp]
+        if len(rp):
+            ids = jnp.asarray(pattern.tuple_ids[j])
+            sums = jax.ops.segment_sum(
+                jnp.einsum("frk,frl->fkl", MR, MR), ids, num_segments=len(pattern.tuple_cols[j])
+            )
+            cols = pattern.tuple_cols[j]
+            A = A.at[cols[:, :, None], cols[:, None, :]].add(sums)
+        ep, o = pattern.e_pos[j], pattern.row_offset[j]
+        if ep is not None and o is not None:
+            Wj = jnp.einsum("frk,frl->fkl", MR, b.M[:, :, ep])
+            W = W.at[o : o + Wj.shape[0], : Wj.shape[1]].set(Wj)
+    V = _diagonal_blocks(factors, blocks, variables)[pattern.eliminated]
+    return _SchurSystem(A, V, W)
+
+
+def _schur_step(pattern: _SchurPattern, variables, state: _SchurSystem, g, damping, free):
+    """δ = −(H + diag(damping))⁻¹ g on the free coordinates, by the reduced system."""
+    offsets = _offsets(variables)
+    e = pattern.eliminated
+    start, stop = offsets[e], offsets[e + 1]
+    n_e, k = state.V.shape[0], state.V.shape[-1]
+
+    def reduced(x, pad):
+        return jnp.concatenate([x[:start], x[stop:], jnp.asarray([pad], x.dtype)])
+
+    fR, dR, gR = reduced(free, False), reduced(damping, 1.0), reduced(jnp.where(free, g, 0.0), 0.0)
+    fE = free[start:stop].reshape(n_e, k)
+    dE = damping[start:stop].reshape(n_e, k)
+    gE = jnp.where(fE, g[start:stop].reshape(n_e, k), 0.0)
+    A = jnp.where(fR[:, None] & fR[None, :], state.A, 0.0) + jnp.diag(jnp.where(fR, dR, 1.0))
+    V = jnp.where(fE[:, :, None] & fE[:, None, :], state.V, 0.0)
+    V = V + jnp.where(fE, dE, 1.0)[:, :, None] * jnp.eye(k, dtype=V.dtype)
+    elem, cols = jnp.asarray(pattern.rows_element), jnp.asarray(pattern.rows_cols)
+    W = state.W * fR[cols][:, :, None] * fE[elem][:, None, :]
+    L = jnp.linalg.cholesky(V)
+    # G_a = W_a L⁻ᵀ: Gᵀ = L⁻¹ Wᵀ.
+    G = jnp.swapaxes(
+        jax.scipy.linalg.solve_triangular(L[elem], jnp.swapaxes(W, 1, 2), lower=True), 1, 2
+    )
+    # The pairs a = b, per R-column tuple, then a < b in chunks (and their transposes).
+    S = A
+    tcols = jnp.asarray(pattern.rows_tuple_cols)
+    own = jax.ops.segment_sum(
+        jnp.einsum("akl,aml->akm", G, G),
+        jnp.asarray(pattern.rows_tuple),
+        num_segments=len(pattern.rows_tuple_cols),
+    )
+    S = S.at[tcols[:, :, None], tcols[:, None, :]].add(-own)
+    U = len(pattern.pair_cols)
+    if U:
+        Gz = jnp.concatenate([G, jnp.zeros_like(G[:1])])
+        pairs = jnp.asarray(pattern.pairs)
+
+        def chunk(i, acc):
+            a, b, s = pairs[i, 0], pairs[i, 1], pairs[i, 2]
+            blocks = jnp.einsum("akl,aml->akm", Gz[a], Gz[b])
+            return acc + jax.ops.segment_sum(blocks, s, num_segments=U + 1, indices_are_sorted=True)
+
+        K = G.shape[1]
+        acc = jax.lax.fori_loop(0, pairs.shape[0], chunk, jnp.zeros((U + 1, K, K), G.dtype))
+        ca, cb = jnp.asarray(pattern.pair_cols[:, 0]), jnp.asarray(pattern.pair_cols[:, 1])
+        off = jnp.zeros_like(S).at[ca[:, :, None], cb[:, None, :]].add(acc[:U])
+        S = S - off - off.T
+    y = jax.vmap(lambda l, v: jax.scipy.linalg.cho_solve((l, True), v))(L, gE)  # Ṽ⁻¹ g_E
+    rhs = (-gR).at[cols].add(jnp.einsum("akl,al->ak", W, y[elem]))
+    xR = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(S, lower=True), rhs)
+    back = jax.ops.segment_sum(jnp.einsum("akl,ak->al", W, xR[cols]), elem, num_segments=n_e)
+    xE = -jax.vmap(lambda l, v: jax.scipy.linalg.cho_solve((l, True), v))(L, gE + back)
+    delta = jnp.concatenate([xR[:start], xE.ravel(), xR[start:-1]])
+    return jnp.where(free, delta, 0.0)
+
+
 # -- the loop --------------------------------------------------------------------------
 
 
@@ -598,10 +856,10 @@ class _Options:
     tolerance: float
     initial_damping: float
     diagonal_damping: bool
-    linear_solver: str  # "dense", "pcg" or "host"
+    linear_solver: str  # "dense", "pcg", "host" or "schur"
     cg_tolerance: float
     cg_max_iterations: int
-    pattern: Optional[_HostPattern] = None
+    pattern: Union[_HostPattern, _SchurPattern, None] = None
     callback: Optional[Callable[..., None]] = None
 
 
@@ -614,6 +872,8 @@ def _system(opts: _Options, factors, variables):
         H = _dense_hessian(blocks, n)
         return c, H, g, jnp.diagonal(H)
     D = _diagonal_blocks(factors, blocks, variables)
+    if isinstance(opts.pattern, _SchurPattern):
+        return c, _schur_system(opts.pattern, factors, blocks, variables), g, _flat_diagonal(D)
     if opts.linear_solver == "pcg":
         return c, (blocks, D), g, _flat_diagonal(D)
     assert opts.pattern is not None
@@ -640,6 +900,8 @@ def _step(opts: _Options, variables, state, g, damping, free) -> jax.Array:
         rhs = -jnp.where(free, g, 0.0)
         return _cg(matvec, rhs, precondition, opts.cg_tolerance, opts.cg_max_iterations)
     pattern = opts.pattern
+    if isinstance(pattern, _SchurPattern):
+        return _schur_step(pattern, variables, state, g, damping, free)
     assert pattern is not None
     # float64 travels as its bits both ways (``_as_bits``).
     out = jax.eval_shape(_as_bits, g)
@@ -898,7 +1160,11 @@ def solve(
             ``"qdldl"`` or ``"banded"``, a sparse (or banded) Cholesky on the host through
             ``jax.pure_callback``, its symbolic analysis done once per structure (these need
             the index arrays concrete: close over them); ``"cholesky"``, CHOLMOD if cvxopt is
-            installed, else QDLDL. ``"auto"``: dense up to
+            installed, else QDLDL; ``"schur"``, the elements of one variable set eliminated
+            first (the set every factor reads at most once with the most unknowns: a bundle
+            adjustment's points), their 3 × 3 (k × k) blocks inverted, and the reduced system
+            on the other sets factorised dense on the device (the indices concrete, as for
+            the host solvers). ``"auto"``: dense up to
             ``DENSE_LIMIT`` unknowns, else CHOLMOD or QDLDL when installed and the indices
             are concrete, else PCG.
         cg_tolerance: PCG's relative residual (also that of the implicit derivative's solve,
@@ -955,8 +1221,8 @@ def solve(
     return _solve(opts, factors, variables, fixed)
 
 
-def _choose(name: str, factors, variables) -> Tuple[str, Optional[_HostPattern]]:
-    """The solver kind (``"dense"``, ``"pcg"``, ``"host"``) and the host pattern."""
+def _choose(name: str, factors, variables) -> Tuple[str, Union[_HostPattern, _SchurPattern, None]]:
+    """The solver kind (``"dense"``, ``"pcg"``, ``"host"``, ``"schur"``) and its pattern."""
     if name == "auto":
         concrete = not any(isinstance(i, jax.core.Tracer) for f in factors for i in f.indices)
         if _offsets(variables)[-1] <= DENSE_LIMIT:
@@ -971,6 +1237,8 @@ def _choose(name: str, factors, variables) -> Tuple[str, Optional[_HostPattern]]
         name = "cholmod" if _sparse.installed("cholmod") else "qdldl"
     if name in ("dense", "pcg"):
         return name, None
+    if name == "schur":
+        return name, _schur_pattern(factors, variables)
     if name in ("cholmod", "qdldl"):
         _sparse.require(name)
     return "host", _host_pattern(factors, variables, name)

@@ -176,6 +176,11 @@ SLOW: List[Tuple[str, str]] = [
         r"test_notebooks\.py::test_0[0-9]_.*",
         "test_examples (the same operations in the examples' quick runs)",
     ),
+    (
+        r"test_bundle_adjustment\.py::test_(optimum_equals_gtsams|implicit_gradient_.*)",
+        "test_bundle_adjustment's cost against GTSAM's and Schur steps against dense ones; "
+        "test_least_squares' implicit derivative against central differences",
+    ),
 ]
 """``(pattern of test ids, the fast check that covers the same code path)``."""
 

@@ -67,6 +67,25 @@ def test_pose_interpolation_quick(tmp_path: Path) -> None:
     assert len(data) > 20_000
 
 
+def test_bundle_adjustment_quick() -> None:
+    """``examples/bundle_adjustment.py --quick`` runs and its synthetic solve ends at the noise
+    level: an RMS reprojection error no larger than at the true values."""
+    proc = subprocess.run(
+        [sys.executable, "examples/bundle_adjustment.py", "--quick"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    out = proc.stdout
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
+    after = _float(
+        r"synthetic:.*?RMS reprojection error [\d.]+ px -> ([\d.]+) px", out.replace("\n", " ")
+    )
+    truth = _float(r"RMS at the true values ([\d.]+) px", out)
+    assert after <= truth, out
+
+
 def test_readme_python_blocks_run() -> None:
     """Every ```python block of README.md runs as written, in order, in a fresh process
     (float32 defaults, as a user's would be); the quick start asserts its own round trip."""
