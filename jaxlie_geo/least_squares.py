@@ -28,8 +28,10 @@ gradient of the cost in x's tangent and H* its Hessian (the exact one, by autodi
 dx*/dθ = −H*⁻¹ ∂G/∂θ. It costs one extra dense Hessian and one solve, and no differentiation
 through the iterations. It is the derivative of the optimum where the solve converged; where
 it stopped early it is that of the minimiser of the local quadratic model at x*, and it is
-kept finite: H* is damped by the final λ (D as in the solve), and a system that Cholesky
-cannot factor gives a zero derivative. The initial values get no derivative (the optimum does
+kept finite: H* is damped by the final λ (D as in the solve; by ``MIN_DAMPING`` where the
+solve stopped because no step lowered the cost, a minimum to working precision at which λ
+has grown without meaning), and a system that Cholesky cannot factor gives a zero
+derivative. The initial values get no derivative (the optimum does
 not depend on them).
 """
 
@@ -1082,7 +1084,10 @@ def _solve_bwd(opts, res, cot):
         _, blocks = _linearise(factors, x)
         Dblocks = _diagonal_blocks(factors, blocks, x)
         diag = _flat_diagonal(Dblocks)
-    damping = sol.damping * (jnp.maximum(diag, DAMPING_FLOOR) if opts.diagonal_damping else 1.0)
+    # Where no step lowered the cost, λ grew only to find x* a minimum to working precision:
+    # the derivative is the optimum's, damped by MIN_DAMPING alone.
+    lam = jnp.where(sol.stop_reason == StopReason.NO_STEP_LOWERS_COST, MIN_DAMPING, sol.damping)
+    damping = lam * (jnp.maximum(diag, DAMPING_FLOOR) if opts.diagonal_damping else 1.0)
     damping = jnp.broadcast_to(damping, zero.shape)
     if opts.linear_solver == "dense":
         w = -_damped_solve(H, rhs, damping, free)  # (H + λD)⁻¹ x̄ on the free coordinates

@@ -142,6 +142,19 @@ def test_implicit_derivative_equals_central_differences() -> None:
             - _last_position_and_cost(p - h * d, x0, anchor)
         ) / (2 * h)
         np.testing.assert_allclose(float(jnp.sum(g * d)), float(fd), rtol=1e-6)
+    # Asked for a decrease below rounding, the solve ends with no step lowering the cost and
+    # λ grown past its limit; the derivative is still the optimum's.
+    tight = jax.jit(jax.value_and_grad(_last_position_at_rounding, has_aux=True))
+    (_, reason), g_tight = tight(p, x0, anchor)
+    assert int(reason) == ls.StopReason.NO_STEP_LOWERS_COST
+    np.testing.assert_allclose(np.asarray(g_tight), np.asarray(g), rtol=1e-7, atol=1e-9)
+
+
+def _last_position_at_rounding(meas_params, init_params, anchor_params):
+    meas, anchor = jl.SE2(meas_params), jl.SE2(anchor_params)
+    sol = ls.solve(_factors(meas, anchor), (jl.SE2(init_params),), tolerance=1e-300)
+    value = jnp.sum(sol.variables[0].translation()[N - 1] ** 2) + sol.cost
+    return value, sol.stop_reason
 
 
 def test_fixed_variables_stay_and_marginals_equal_the_linear_covariance() -> None:
