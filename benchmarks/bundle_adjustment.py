@@ -35,8 +35,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
-import pathlib
 import time
 
 import numpy as np
@@ -185,14 +183,9 @@ def main() -> None:
         )
     g = data["implicit_gradient"]
     print(f"implicit gradient vs central difference: relative error {g['relative_error']:.2e}")
-    if getattr(args, "json", None):
-        pathlib.Path(args.json).write_text(json.dumps(data, indent=1) + "\n")
-    if args.save:
-        machine = args.machine or C.machine_name(data["machine"])
-        path = pathlib.Path(args.raw_dir) / machine / "bundle-adjustment.json"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(data, indent=1) + "\n")
-        print(f"wrote {path}")
+    from benchmarks.report import save
+
+    save("bundle-adjustment", data, args)
 
 
 if __name__ == "__main__":

@@ -598,34 +598,97 @@ def ik_program_table(data: dict) -> list:
     return _heading(label(info), facts) + _spec(IK_COLUMNS, rows) + [""]
 
 
-def least_squares_table(data: dict) -> list:
-    info, r = data["machine"], data["results"][0]
+LEAST_SQUARES_COLUMNS = """
+    batch | l | {batch}
+    solver | l | {solver}
+    time per problem | r | {per}
+    GTSAM / it | r | {speedup}
+    compile | r | {compile}
+    cost ratio (ours / its) | r | {cost_ratio}
+    from Kabsch (angle, translation) | r | {kabsch}
+    derivative | r | {derivative}
+"""
+
+
+def _least_squares_rows(r: dict) -> list:
+    """One batch's rows: ours, GTSAM's loop and (where run) optimistix."""
     B = r["problems"]
-    per = lambda key: fmt_ns(r[key] / B * 1e9)
-    body = [
-        [
-            "jaxlie_geo",
-            per("run_ours_s"),
-            f"{r['compile_ours_s']:.1f} s",
-            "1",
-            f"{r['gradient_rel_error_max']:.1e}",
-        ],
-        ["GTSAM (loop)", per("run_gtsam_s"), "–", f"{r['cost_ratio_gtsam_max']:.9f}", "–"],
-        [
-            "optimistix",
-            per("run_optimistix_s"),
-            f"{r['compile_optimistix_s']:.1f} s",
-            f"{r['cost_ratio_optimistix_max']:.9f}",
-            f"{r['optimistix_gradient_rel_error_max']:.1e}",
-        ],
+    names = {"ours": "jaxlie_geo", "gtsam": "GTSAM (loop)", "optimistix": "optimistix"}
+    size = f"{r['points']} points" if "points" in r else f"{r['poses']} poses"
+    gradient = {"ours": "gradient_rel_error_max", "optimistix": "optimistix_gradient_rel_error_max"}
+    rows = []
+    for side in [s for s in names if f"run_{s}_s" in r]:
+        compile_s, kabsch = r.get(f"compile_{side}_s"), r.get(f"kabsch_{side}")
+        rows.append(
+            {
+                "batch": "" if rows else f"{r['problem']} (B = {B:,}, {size})",
+                "solver": names[side]
+                + (f" ({r['converged']:,} of {B:,} converged)" if side == "ours" else ""),
+                "per": fmt_ns(r[f"run_{side}_s"] / B * 1e9),
+                "speedup": f"{r['run_gtsam_s'] / r[f'run_{side}_s']:.2f}x",
+                "compile": "–" if compile_s is None else f"{compile_s:.1f} s",
+                "cost_ratio": f"{r.get(f'cost_ratio_{side}_max', 1.0):.9f}",
+                "kabsch": "–" if kabsch is None else "{:.1e} rad, {:.1e}".format(*kabsch),
+                "derivative": f"{r[gradient[side]]:.1e}" if side in gradient else "–",
+            }
+        )
+    return rows
+
+
+def least_squares_table(data: dict) -> list:
+    """The batched solves beside their peers, one row per batch and solver, and the
+    derivative checks that have no peer."""
+    info, results = data["machine"], data["results"]
+    rows = [row for r in results if "problems" in r for row in _least_squares_rows(r)]
+    notes = [
+        f"{r['problem'].capitalize()} ({r['control_points']} control points, {r['samples']} "
+        f"samples): derivative error {r['gradient_rel_error_max']:.1e}."
+        for r in results
+        if "problems" not in r
     ]
-    facts = (
-        f"B = {B}, P = {r['poses']} poses, {r['edges']} edges; jax {info.get('jax', '?')}, "
-        f"GTSAM {info.get('gtsam', '?')}, optimistix {info.get('optimistix', '?')}, commit "
-        f"{_commit(info)}, measured {_date(info)}; {r['converged']} of {B} converged."
+    facts = _facts(
+        info,
+        "jax {jax}, GTSAM {gtsam}, optimistix {optimistix}, {dtype}, commit {commit}, "
+        "measured {date}.",
     )
-    header = ["solver", "time per problem", "compile", "cost ratio (ours / its)", "derivative"]
-    return _heading(label(info), facts) + table(header, body, "lrrrr") + [""]
+    return _heading(label(info), facts) + _spec(LEAST_SQUARES_COLUMNS, rows) + [""] + notes + [""]
+
+
+BUNDLE_COLUMNS = """
+    problem | l | {problem}
+    cameras | r | {cameras:,}
+    points | r | {points:,}
+    observations | r | {observations:,}
+    initial cost | r | {initial_cost:.6g}
+    GTSAM final (iterations) | r | {gtsam_cost:.9g} ({gtsam_iterations})
+    ours final (iterations) | r | {ours_cost:.9g} ({ours_iterations})
+    GTSAM time | r | {gtsam_s!t}
+    ours time | r | {ours_s!t}
+    ours, first call | r | {ours_cold_s!t}
+    ours / GTSAM time | r | {ratio:.2f}
+"""
+
+
+def bundle_adjustment_table(data: dict) -> list:
+    """Bundle adjustment beside GTSAM, and the implicit gradient against central differences."""
+    info, g = data["machine"], data["implicit_gradient"]
+    rows = [
+        {**r, "problem": r["problem"].removesuffix(".txt"), "ratio": r["ours_s"] / r["gtsam_s"]}
+        for r in data["rows"]
+    ]
+    kernel = {tuple(r["robust"]) for r in data["rows"]}
+    kernels = ", ".join(f"{k.capitalize()} (k = {v:g})" for k, v in sorted(kernel))
+    facts = _facts(info, "jax {jax}, GTSAM {gtsam}, {dtype}, commit {commit}, measured {date}.")
+    gradient = (
+        f"Implicit gradient ({g['problem']}): {g['implicit']:.10g} against the central "
+        f"difference {g['central_difference']:.10g} (step {g['step']:g}), relative error "
+        f"{g['relative_error']:.1e}."
+    )
+    return (
+        _heading(label(info), f"{facts} Robust kernel: {kernels}.")
+        + _spec(BUNDLE_COLUMNS, rows)
+        + ["", gradient, ""]
+    )
 
 
 def accuracy_table(data: dict) -> list:
@@ -944,6 +1007,7 @@ SECTIONS = {
     "pose-graphs": (False, pose_graphs_table),
     "spline-fit": (False, spline_fit_table),
     "least-squares": (False, least_squares_table),
+    "bundle-adjustment": (False, bundle_adjustment_table),
     "accuracy": (False, accuracy_table),
 }
 
