@@ -227,7 +227,9 @@ def synthetic(
     translations by 0.05, points by 0.05, f by 1%).
 
     Args:
-        n_cameras, n_points, observations_per_point: the problem's size
+        n_cameras: the number of cameras.
+        n_points: the number of points.
+        observations_per_point: the number of distinct cameras that see each point
             (n_observations = n_points · observations_per_point).
         pixel_noise: the observations' noise standard deviation, pixels.
         key: the NumPy random generator's key; the same key gives the same problem.

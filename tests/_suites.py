@@ -181,6 +181,11 @@ SLOW: List[Tuple[str, str]] = [
         "test_bundle_adjustment's cost against GTSAM's and Schur steps against dense ones; "
         "test_least_squares' implicit derivative against central differences",
     ),
+    (
+        r"test_examples\.py::test_(batched_pose_fits|learn_odometry_scale)_quick",
+        "test_least_squares::test_pose_graph_reaches_a_stationary_point_and_vmap_equals_each_"
+        "alone and ::test_implicit_derivative_equals_central_differences",
+    ),
 ]
 """``(pattern of test ids, the fast check that covers the same code path)``."""
 

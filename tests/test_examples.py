@@ -86,6 +86,43 @@ def test_bundle_adjustment_quick() -> None:
     assert after <= truth, out
 
 
+def _run_quick(script: str) -> str:
+    proc = subprocess.run(
+        [sys.executable, f"examples/{script}", "--quick"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    out = proc.stdout
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
+    return out
+
+
+def test_batched_pose_fits_quick() -> None:
+    """``examples/batched_pose_fits.py --quick``: every vmapped fit converges to the Kabsch
+    optimum (``SE3.align``, closed form) and equals the same problem solved alone."""
+    out = _run_quick("batched_pose_fits.py")
+    assert re.search(r"converged (\d+)/\1,", out), out
+    assert _float(r"against Kabsch \(SE3.align\): (\S+) rad", out) < 1e-6, out
+    assert _float(r"against Kabsch \(SE3.align\): \S+ rad, (\S+) m", out) < 1e-6, out
+    assert _float(r"against three solved alone: (\S+) rad", out) < 1e-12, out
+    assert _float(r"against three solved alone: \S+ rad, (\S+) m", out) < 1e-12, out
+
+
+def test_learn_odometry_scale_quick() -> None:
+    """``examples/learn_odometry_scale.py --quick``: the implicit derivative through the solve
+    equals central differences, and the learned scale lands near the true one and lowers the
+    trajectory error."""
+    out = _run_quick("learn_odometry_scale.py")
+    assert _float(r"relative difference (\S+)", out) < 1e-6, out
+    scale = _float(r"learned odometry scale (\S+)", out)
+    assert abs(scale - 1.08) < 0.02, out
+    before = _float(r"RMS position error (\S+) m ->", out)
+    after = _float(r"RMS position error \S+ m -> (\S+) m", out)
+    assert after < 0.5 * before, out
+
+
 def test_readme_python_blocks_run() -> None:
     """Every ```python block of README.md runs as written, in order, in a fresh process
     (float32 defaults, as a user's would be); the quick start asserts its own round trip."""
