@@ -40,7 +40,8 @@ class Solve:
         stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
         converged: whether it stopped at a minimum: on the tolerance, or with no step
             lowering the cost at any damping (rather than at the iteration limit or, for
-            Gauss–Newton, on a step that raised the cost or a singular system).
+            Gauss–Newton, on a step that raised the cost or a singular system, or where the
+            cost is not finite).
     """
 
     costs: onp.ndarray

@@ -92,6 +92,10 @@ class StopReason(enum.IntEnum):
     STEP_RAISED_COST = 4
     #: Gauss–Newton: the linear system gave a non-finite step (a singular system).
     NON_FINITE_STEP = 5
+    #: The cost at a linearisation point is not finite: NaN or ±inf in the data or the
+    #: initial values that ``solve`` could not check (they were traced), or residuals that
+    #: overflow there. The values are returned as they were.
+    NON_FINITE_COST = 6
 
     @property
     def description(self) -> str:
@@ -110,6 +114,7 @@ _DESCRIPTIONS = {
         "a Gauss–Newton step raised the cost; the previous estimate is kept"
     ),
     StopReason.NON_FINITE_STEP: "the linear system gave a non-finite step",
+    StopReason.NON_FINITE_COST: "the cost is not finite (NaN or ±inf in the data or values)",
 }
 
 
@@ -259,6 +264,44 @@ def _check(factors: Sequence[Factor], variables: Tuple[Variable, ...]) -> None:
             counts.add(idx.shape[0])
         if len(counts) != 1:
             raise ValueError(f"least_squares: factor {j}'s index arrays differ in length")
+
+
+@jax.jit
+def _all_finite(trees: Tuple[Any, ...]) -> jax.Array:
+    """One bool per tree: whether all its floating-point leaves are finite."""
+    flags = []
+    for tree in trees:
+        leaves = [
+            x for x in jax.tree_util.tree_leaves(tree) if jnp.issubdtype(x.dtype, jnp.inexact)
+        ]
+        flags.append(
+            jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves])) if leaves else True
+        )
+    return jnp.stack([jnp.asarray(f) for f in flags]) if flags else jnp.zeros((0,), bool)
+
+
+def _check_finite(factors: Sequence[Factor], variables: Tuple[Variable, ...]) -> None:
+    """``ValueError`` naming the factor or the set, for NaN or ±inf in concrete data or
+    initial values (one compiled reduction; traced values are left to the loop)."""
+    trees = tuple(f.data for f in factors) + tuple(variables)
+    leaves = jax.tree_util.tree_leaves(trees)
+    if not leaves or any(isinstance(x, jax.core.Tracer) for x in leaves):
+        return
+    flags = _all_finite(trees)
+    if isinstance(flags, jax.core.Tracer):  # concrete leaves closed over inside a trace
+        return
+    ok = onp.asarray(flags)
+    for j in range(len(factors)):
+        if not ok[j]:
+            raise ValueError(
+                f"least_squares: factor {j}'s data holds non-finite values (NaN or ±inf)"
+            )
+    for s in range(len(variables)):
+        if not ok[len(factors) + s]:
+            raise ValueError(
+                f"least_squares: variable set {s}'s initial values hold non-finite values "
+                "(NaN or ±inf)"
+            )
 
 
 # -- linearisation ---------------------------------------------------------------------
@@ -1003,6 +1046,7 @@ def _minimise(opts: _Options, factors, variables, fixed) -> Solution:
             raised = finite & ~small & ~(c_trial <= c)  # also a NaN cost
         lam_up = st["lam"] * st["nu"]
         conditions = (  # the first that holds is the reason
+            (moved & ~jnp.isfinite(c), R.NON_FINITE_COST),
             (converged, R.DECREASE_BELOW_TOLERANCE),
             (at_limit, R.MAX_ITERATIONS),
             (jnp.asarray(not lm) & ~finite, R.NON_FINITE_STEP),
@@ -1193,6 +1237,10 @@ def solve(
             a set that does not exist, indices that are not ``(F,)`` ints, residuals that are
             not vectors, or ``method`` or an option out of range.
         IndexError: at trace time, for concrete indices out of range.
+
+    Non-finite values (NaN, ±inf) in concrete data or initial values raise a ``ValueError``
+    naming the factor or the set; traced ones (under ``jit``, ``vmap``, ``grad``) end the
+    solve with ``StopReason.NON_FINITE_COST``, not converged, the values unchanged.
     """
     if method not in ("lm", "gn"):
         raise ValueError(f"least_squares.solve: method must be 'lm' or 'gn', got {method!r}")
@@ -1207,6 +1255,7 @@ def solve(
     variables = tuple(variables)
     factors = tuple(factors)
     _check(factors, variables)
+    _check_finite(factors, variables)
     if fixed is not None:
         fixed = tuple(fixed)
         if len(fixed) != len(variables):
