@@ -11,7 +11,8 @@ squares estimation of transformation parameters between two point patterns*, IEE
 one.
 
 It prints the compile time, the time per problem of the batched solve, and the largest
-rotation angle and translation distance between the solved poses and the Kabsch poses.
+rotation angle and translation distance between the solved poses and the Kabsch poses, the
+first three problems solved alone, and the true poses.
 ``--quick`` solves 100 problems.
 """
 

@@ -1,7 +1,8 @@
 """Learning an odometry calibration by gradient through ``least_squares.solve``.
 
-A planar robot's wheel odometry under-reports distance by a constant factor (a wheel radius
-set 8% too small): each measured motion Z_k ∈ SE(2) has its translation scaled by 1/1.08.
+A planar robot's wheel odometry under-reports distance by a constant factor: each measured
+motion Z_k ∈ SE(2) has its translation scaled by 1/1.08 (a wheel radius set 7.4% too small),
+so the true distances are 1.08 times the reported ones.
 The trajectory is estimated from the odometry and sparse, noisy position fixes:
 
     x*(θ) = argmin_x ½ Σ_k ‖log(S_θ(Z_k)⁻¹ x_k⁻¹ x_{k+1}) / σ_odo‖² + ½ Σ_j ‖(t(x_j) − g_j)/σ_fix‖²,

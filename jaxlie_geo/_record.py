@@ -39,9 +39,9 @@ class Solve:
         time: wall-clock seconds of the whole call.
         stop_reason: why it stopped, in words (``least_squares.StopReason.description``).
         converged: whether it stopped at a minimum: on the tolerance, or with no step
-            lowering the cost at any damping (rather than at the iteration limit or, for
-            Gauss–Newton, on a step that raised the cost or a singular system, or where the
-            cost is not finite).
+            lowering the cost at any damping (rather than at the iteration limit, for
+            Gauss–Newton on a step that raised the cost or a singular system, or, for either
+            method, where the cost is not finite).
     """
 
     costs: onp.ndarray

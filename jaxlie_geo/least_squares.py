@@ -92,9 +92,9 @@ class StopReason(enum.IntEnum):
     STEP_RAISED_COST = 4
     #: Gauss–Newton: the linear system gave a non-finite step (a singular system).
     NON_FINITE_STEP = 5
-    #: The cost at a linearisation point is not finite: NaN or ±inf in the data or the
-    #: initial values that ``solve`` could not check (they were traced), or residuals that
-    #: overflow there. The values are returned as they were.
+    #: The cost at a linearisation point is not finite: NaN or ±inf in data or values that
+    #: the residuals read, or residuals that overflow there. The values of that point are
+    #: returned.
     NON_FINITE_COST = 6
 
     @property
@@ -264,44 +264,6 @@ def _check(factors: Sequence[Factor], variables: Tuple[Variable, ...]) -> None:
             counts.add(idx.shape[0])
         if len(counts) != 1:
             raise ValueError(f"least_squares: factor {j}'s index arrays differ in length")
-
-
-@jax.jit
-def _all_finite(trees: Tuple[Any, ...]) -> jax.Array:
-    """One bool per tree: whether all its floating-point leaves are finite."""
-    flags = []
-    for tree in trees:
-        leaves = [
-            x for x in jax.tree_util.tree_leaves(tree) if jnp.issubdtype(x.dtype, jnp.inexact)
-        ]
-        flags.append(
-            jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves])) if leaves else True
-        )
-    return jnp.stack([jnp.asarray(f) for f in flags]) if flags else jnp.zeros((0,), bool)
-
-
-def _check_finite(factors: Sequence[Factor], variables: Tuple[Variable, ...]) -> None:
-    """``ValueError`` naming the factor or the set, for NaN or ±inf in concrete data or
-    initial values (one compiled reduction; traced values are left to the loop)."""
-    trees = tuple(f.data for f in factors) + tuple(variables)
-    leaves = jax.tree_util.tree_leaves(trees)
-    if not leaves or any(isinstance(x, jax.core.Tracer) for x in leaves):
-        return
-    flags = _all_finite(trees)
-    if isinstance(flags, jax.core.Tracer):  # concrete leaves closed over inside a trace
-        return
-    ok = onp.asarray(flags)
-    for j in range(len(factors)):
-        if not ok[j]:
-            raise ValueError(
-                f"least_squares: factor {j}'s data holds non-finite values (NaN or ±inf)"
-            )
-    for s in range(len(variables)):
-        if not ok[len(factors) + s]:
-            raise ValueError(
-                f"least_squares: variable set {s}'s initial values hold non-finite values "
-                "(NaN or ±inf)"
-            )
 
 
 # -- linearisation ---------------------------------------------------------------------
@@ -1238,9 +1200,10 @@ def solve(
             not vectors, or ``method`` or an option out of range.
         IndexError: at trace time, for concrete indices out of range.
 
-    Non-finite values (NaN, ±inf) in concrete data or initial values raise a ``ValueError``
-    naming the factor or the set; traced ones (under ``jit``, ``vmap``, ``grad``) end the
-    solve with ``StopReason.NON_FINITE_COST``, not converged, the values unchanged.
+    A cost that is not finite at a linearisation point (NaN or ±inf in data or values that
+    the residuals read, or residuals that overflow) ends the solve with
+    ``StopReason.NON_FINITE_COST``, not converged, the values those of that point; eager or
+    traced alike. Non-finite values that no residual reads change nothing.
     """
     if method not in ("lm", "gn"):
         raise ValueError(f"least_squares.solve: method must be 'lm' or 'gn', got {method!r}")
@@ -1255,7 +1218,6 @@ def solve(
     variables = tuple(variables)
     factors = tuple(factors)
     _check(factors, variables)
-    _check_finite(factors, variables)
     if fixed is not None:
         fixed = tuple(fixed)
         if len(fixed) != len(variables):

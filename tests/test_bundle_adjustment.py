@@ -91,8 +91,9 @@ def test_schur_steps_equal_dense_steps() -> None:
     for a, b in zip(jax.tree.leaves(out[0].variables), jax.tree.leaves(out[1].variables)):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-10)
     # The two factorisations round differently: steps agree to about 1e-12 relative, and
-    # the cost, first order in the step away from the optimum, to the same order (1.4e-12
-    # seen on AMD EPYC); 1e-10 leaves room and still fails on any wrong step.
+    # the cost after two iterations (not yet at the optimum, so first order in the step) to
+    # the same order (1.4e-12 seen on AMD EPYC); 1e-10 leaves room and still fails on any
+    # wrong step.
     np.testing.assert_allclose(out[0].cost, out[1].cost, rtol=1e-10)
 
 
