@@ -1203,7 +1203,7 @@ def solve(
     A cost that is not finite at a linearisation point (NaN or ±inf in data or values that
     the residuals read, or residuals that overflow) ends the solve with
     ``StopReason.NON_FINITE_COST``, not converged, the values those of that point; eager or
-    traced alike. Non-finite values that no residual reads change nothing.
+    traced alike.
     """
     if method not in ("lm", "gn"):
         raise ValueError(f"least_squares.solve: method must be 'lm' or 'gn', got {method!r}")

@@ -18,20 +18,27 @@ def _float(pattern: str, text: str) -> float:
     return float(match.group(1))
 
 
+def _run_quick(script: str, *args: str, timeout: int = 300) -> str:
+    """``examples/<script> --quick *args`` in a fresh process; its stdout, after asserting
+    that it exited 0."""
+    proc = subprocess.run(
+        [sys.executable, f"examples/{script}", "--quick", *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+    out = proc.stdout
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
+    return out
+
+
 def test_pose_interpolation_quick(tmp_path: Path) -> None:
     """``examples/pose_interpolation.py --quick`` runs, prints its timing report, agrees with an
     independent float64 NumPy implementation (and with jaxlie where installed), and writes a
     PNG."""
     png = tmp_path / "pictures" / "pose_interpolation.png"  # parent does not exist yet
-    proc = subprocess.run(
-        [sys.executable, "examples/pose_interpolation.py", "--quick", "--out", str(png)],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    out = proc.stdout
-    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
+    out = _run_quick("pose_interpolation.py", "--out", str(png), timeout=120)
 
     # The expected report lines.
     assert re.search(r"Interpolating 10,000 SE3 pose pairs \(float32\)", out), out
@@ -70,33 +77,12 @@ def test_pose_interpolation_quick(tmp_path: Path) -> None:
 def test_bundle_adjustment_quick() -> None:
     """``examples/bundle_adjustment.py --quick`` runs and its synthetic solve ends at the noise
     level: an RMS reprojection error no larger than at the true values."""
-    proc = subprocess.run(
-        [sys.executable, "examples/bundle_adjustment.py", "--quick"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    out = proc.stdout
-    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
+    out = _run_quick("bundle_adjustment.py")
     after = _float(
         r"synthetic:.*?RMS reprojection error [\d.]+ px -> ([\d.]+) px", out.replace("\n", " ")
     )
     truth = _float(r"RMS at the true values ([\d.]+) px", out)
     assert after <= truth, out
-
-
-def _run_quick(script: str) -> str:
-    proc = subprocess.run(
-        [sys.executable, f"examples/{script}", "--quick"],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    out = proc.stdout
-    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{out}\nstderr:\n{proc.stderr}"
-    return out
 
 
 def test_batched_pose_fits_quick() -> None:
